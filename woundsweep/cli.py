@@ -1,0 +1,70 @@
+"""Command-line interface: ``woundsweep COMMAND``.
+
+Each command lives in ``woundsweep/commands/<name>.py`` as a click command named ``cmd``
+and is listed in ``COMMANDS``; modules are imported lazily so that ``--help`` stays fast
+and commands that do not need DOLFINx never import it.
+"""
+
+from __future__ import annotations
+
+import importlib
+import sys
+
+import click
+
+from . import __version__
+from .errors import WoundsweepError
+
+__all__ = ["COMMANDS", "main"]
+
+# name -> (module, one-line help). Only commands that work are listed.
+COMMANDS: dict[str, tuple[str, str]] = {
+    "generate": ("woundsweep.commands.generate", "Expand a sweep YAML into RUN_DIR/manifest.parquet."),
+}
+
+
+class LazyGroup(click.Group):
+    def list_commands(self, ctx: click.Context) -> list[str]:
+        return list(COMMANDS)
+
+    def get_command(self, ctx: click.Context, name: str) -> click.Command | None:
+        if name not in COMMANDS:
+            return None
+        return importlib.import_module(COMMANDS[name][0]).cmd
+
+    def format_commands(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
+        rows = [(name, help_) for name, (_, help_) in COMMANDS.items()]
+        with formatter.section("Commands"):
+            formatter.write_dl(rows)
+
+
+@click.group(cls=LazyGroup, context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(__version__, prog_name="woundsweep")
+def cli() -> None:
+    """Finite-element atlas of wound closure in two-layer hyperelastic skin.
+
+    Units: lengths in mm, stresses in kPa, forces in mN.
+    Typical use: generate -> run -> analyze.
+    """
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point: user errors become one line on stderr and exit status 2 (no traceback)."""
+    try:
+        cli.main(args=argv, prog_name="woundsweep", standalone_mode=False)
+    except WoundsweepError as err:
+        click.echo(f"woundsweep: error: {err}", err=True)
+        return err.exit_code
+    except click.exceptions.Abort:
+        click.echo("woundsweep: aborted", err=True)
+        return 130
+    except click.ClickException as err:
+        click.echo(f"woundsweep: error: {err.format_message()}", err=True)
+        return 2
+    except click.exceptions.Exit as err:
+        return err.exit_code
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

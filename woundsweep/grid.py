@@ -1,0 +1,460 @@
+"""Sweep files: loading, validation, and expansion into the job manifest.
+
+A sweep YAML has the sections ``grid`` (axes shared by both wound shapes), ``shapes``
+(the shape-specific axis of each wound shape), ``exclude`` (rules, as expressions over the
+manifest's columns, that drop combinations), and the settings ``materials``, ``stages``,
+``solver`` and ``analysis`` (defaults: the paper's values, see ``DEFAULTS``).
+
+Lengths are in mm, moduli in kPa, penalties in GPa (converted where used).
+"""
+
+from __future__ import annotations
+
+import ast
+import copy
+import hashlib
+import itertools
+import json
+import math
+from pathlib import Path
+from typing import Any, NamedTuple
+
+import numpy as np
+import pandas as pd
+import yaml
+
+from .errors import StoreError, SweepError
+
+__all__ = [
+    "DEFAULTS",
+    "GEOMETRY_KEYS",
+    "MANIFEST_COLUMNS",
+    "Run",
+    "Sweep",
+    "canonical_hash",
+    "expand",
+    "load_run",
+    "load_sweep",
+    "parse_sweep",
+]
+
+# Grid axes in canonical order: job_index follows this order whatever the YAML key order is.
+GRID_AXES = (
+    "dermal_thickness_mm",
+    "subcutis_thickness_factor",
+    "patch_size_factor",
+    "wound_width_factor",
+    "mesh_size_factor",
+    "skin_type",
+    "orientation_deg",
+)
+SHAPE_AXES = {"cylindrical": "wound_aspect_factor", "wedge": "wound_depth_factor"}
+# Parameters that define the mesh; the 9 jobs (skin type x orientation) of a geometry share it.
+GEOMETRY_KEYS = (
+    "wound_shape",
+    "dermal_thickness_mm",
+    "subcutis_thickness_factor",
+    "patch_size_factor",
+    "wound_width_factor",
+    "mesh_size_factor",
+    "wound_depth_factor",
+    "wound_aspect_factor",
+)
+DERIVED = (
+    "subcutis_thickness_mm",
+    "total_thickness_mm",
+    "patch_half_length_mm",
+    "wound_width_mm",
+    "wound_depth_mm",
+)
+MANIFEST_COLUMNS = (
+    "job_index",
+    "job_id",
+    "geometry_id",
+    "wound_shape",
+    "dermal_thickness_mm",
+    "subcutis_thickness_factor",
+    "patch_size_factor",
+    "wound_width_factor",
+    "mesh_size_factor",
+    "wound_depth_factor",
+    "wound_aspect_factor",
+    "orientation_deg",
+    "skin_type",
+    *DERIVED,
+)
+
+# The paper's settings (Table 2 from Flynn et al., Tables 2-3; stage settings from Methods).
+DEFAULTS: dict[str, Any] = {
+    "materials": {
+        "subcutis": {"C10_kPa": 0.4, "C20_kPa": 1.4, "K_kPa": 50.0},
+        "skin_types": {
+            "normal": {
+                "c_kPa": 21.3,
+                "mu_kPa": [17.8, 5.9, 5.9],
+                "lambda11_kPa": 1.0,
+                "lambda_other_kPa": 1.0,
+                "K_kPa": 250.0,
+                "tsf": 1.10,
+            },
+            "stiff": {
+                "c_kPa": 42.6,
+                "mu_kPa": [35.6, 11.8, 11.8],
+                "lambda11_kPa": 11.8,
+                "lambda_other_kPa": 2.0,
+                "K_kPa": 250.0,
+                "tsf": 1.05,
+            },
+            "soft": {
+                "c_kPa": 10.7,
+                "mu_kPa": [8.9, 3.0, 3.0],
+                "lambda11_kPa": 0.5,
+                "lambda_other_kPa": 0.5,
+                "K_kPa": 250.0,
+                "tsf": 1.15,
+            },
+        },
+    },
+    "stages": {
+        "closure_zone": {"y_fraction": 1.0 / 3.0, "depth_fraction": 0.5},
+        "contact_penalty_GPa": [1.0, 5.0, 100.0],
+    },
+    "solver": {
+        "quadrature_degree": 1,
+        "max_iterations": 60,
+        "rtol": 1e-8,
+        "atol": 1e-10,
+        "load_steps": 4,
+        "max_load_cuts": 6,
+    },
+    "analysis": {
+        "quantiles": 8,
+        "max_depth": 6,
+        "n_estimators": 150,
+        "learning_rate": 0.1,
+        "early_stopping_rounds": 20,
+        "seed": 0,
+    },
+}
+SETTINGS = tuple(DEFAULTS)
+TOP_KEYS = ("name", "description", "grid", "shapes", "exclude", *SETTINGS)
+
+
+class Sweep(NamedTuple):
+    """A validated sweep: grid axes and settings with defaults filled in."""
+
+    path: str
+    name: str
+    grid: dict[str, list[Any]]
+    shapes: dict[str, dict[str, list[float]]]
+    exclude: list[str]
+    materials: dict[str, Any]
+    stages: dict[str, Any]
+    solver: dict[str, Any]
+    analysis: dict[str, Any]
+
+    def resolved(self) -> dict[str, Any]:
+        """Everything that determines the jobs and their results (not the file's formatting)."""
+        d = self._asdict()
+        d.pop("path")
+        return d
+
+
+class Run(NamedTuple):
+    """A run directory made by ``woundsweep generate``."""
+
+    run_dir: Path
+    sweep: Sweep
+    manifest: pd.DataFrame
+
+
+def _is_number(v: Any) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+
+def _axis(path: str, key: str, values: Any, *, kind: str = "positive") -> list[Any]:
+    if not isinstance(values, list) or not values:
+        raise SweepError(path, key, f"expected a non-empty list, got {values!r}")
+    for v in values:
+        if kind == "name":
+            if not isinstance(v, str) or not v:
+                raise SweepError(path, key, f"expected names (strings), got {v!r}")
+            continue
+        if not _is_number(v):
+            raise SweepError(path, key, f"expected numbers, got {v!r}")
+        if kind == "positive" and v <= 0:
+            raise SweepError(path, key, f"expected positive numbers, got {v!r}")
+        if kind == "nonnegative" and v < 0:
+            raise SweepError(path, key, f"expected non-negative numbers, got {v!r}")
+    if len(set(values)) != len(values):
+        raise SweepError(path, key, f"duplicate values in {values!r}")
+    return [v if kind == "name" else float(v) for v in values]
+
+
+def _merge(path: str, key: str, default: Any, given: Any) -> Any:
+    """Overlay ``given`` on ``default``, checking keys and types against the default."""
+    if given is None:
+        return copy.deepcopy(default)
+    if isinstance(default, dict):
+        if not isinstance(given, dict):
+            raise SweepError(path, key, f"expected a mapping, got {type(given).__name__}")
+        # skin_types is open: new names may be added, each with the full Fung parameter set.
+        if key.endswith("skin_types"):
+            out = {}
+            template = default["normal"]
+            for name, params in given.items():
+                base = default.get(name)
+                if base is None:
+                    missing = set(template) - set(params or {})
+                    if missing:
+                        raise SweepError(
+                            path, f"{key}.{name}", f"missing keys {sorted(missing)}"
+                        )
+                    base = template
+                out[name] = _merge(path, f"{key}.{name}", base, params)
+            return out
+        unknown = set(given) - set(default)
+        if unknown:
+            raise SweepError(
+                path, f"{key}.{sorted(unknown)[0]}", f"unknown key (expected one of {sorted(default)})"
+            )
+        return {k: _merge(path, f"{key}.{k}", default[k], given.get(k)) for k in default}
+    if isinstance(default, list):
+        if not isinstance(given, list) or len(given) != len(default):
+            raise SweepError(path, key, f"expected a list of {len(default)} numbers, got {given!r}")
+        return [_merge(path, f"{key}[{i}]", d, g) for i, (d, g) in enumerate(zip(default, given))]
+    if isinstance(default, bool) or not _is_number(given):
+        raise SweepError(path, key, f"expected a number, got {given!r}")
+    if isinstance(default, int) and not float(given).is_integer():
+        raise SweepError(path, key, f"expected an integer, got {given!r}")
+    if isinstance(default, int):
+        if given < 0:
+            raise SweepError(path, key, f"expected a non-negative integer, got {given!r}")
+        return int(given)
+    if given <= 0:
+        raise SweepError(path, key, f"expected a positive number, got {given!r}")
+    return float(given)
+
+
+def parse_sweep(data: Any, path: str = "<sweep>") -> Sweep:
+    """Validate a parsed sweep document; raise `SweepError` naming the key path."""
+    if not isinstance(data, dict):
+        raise SweepError(path, "", "expected a mapping at the top level")
+    unknown = [k for k in data if k not in TOP_KEYS]
+    if unknown:
+        raise SweepError(path, str(unknown[0]), f"unknown key (expected one of {list(TOP_KEYS)})")
+    for key in ("grid", "shapes"):
+        if key not in data:
+            raise SweepError(path, key, "missing section")
+    grid_in = data["grid"]
+    if not isinstance(grid_in, dict):
+        raise SweepError(path, "grid", "expected a mapping of axis name -> list of values")
+    for k in grid_in:
+        if k not in GRID_AXES:
+            raise SweepError(path, f"grid.{k}", f"unknown axis (expected one of {list(GRID_AXES)})")
+    grid: dict[str, list[Any]] = {}
+    for k in GRID_AXES:
+        if k not in grid_in:
+            raise SweepError(path, f"grid.{k}", "missing axis")
+        kind = {"skin_type": "name", "orientation_deg": "number"}.get(k, "positive")
+        grid[k] = _axis(path, f"grid.{k}", grid_in[k], kind=kind)
+
+    shapes_in = data["shapes"]
+    if not isinstance(shapes_in, dict) or not shapes_in:
+        raise SweepError(path, "shapes", "expected a non-empty mapping of wound shape -> axis")
+    shapes: dict[str, dict[str, list[float]]] = {}
+    for shape in sorted(shapes_in):
+        if shape not in SHAPE_AXES:
+            raise SweepError(path, f"shapes.{shape}", f"unknown wound shape (expected one of {list(SHAPE_AXES)})")
+        spec = shapes_in[shape]
+        axis = SHAPE_AXES[shape]
+        if not isinstance(spec, dict) or set(spec) != {axis}:
+            raise SweepError(path, f"shapes.{shape}", f"expected exactly the key {axis!r}")
+        kind = "nonnegative" if shape == "cylindrical" else "positive"
+        shapes[shape] = {axis: _axis(path, f"shapes.{shape}.{axis}", spec[axis], kind=kind)}
+    if "wedge" in shapes and max(shapes["wedge"]["wound_depth_factor"]) >= 1:
+        raise SweepError(
+            path, "shapes.wedge.wound_depth_factor", "expected factors below 1 (the depth is a fraction of the total thickness)"
+        )
+
+    exclude = data.get("exclude") or []
+    if not isinstance(exclude, list) or not all(isinstance(r, str) for r in exclude):
+        raise SweepError(path, "exclude", "expected a list of rule expressions (strings)")
+    for i, rule in enumerate(exclude):
+        _compile_rule(path, f"exclude[{i}]", rule)
+
+    settings = {k: _merge(path, k, DEFAULTS[k], data.get(k)) for k in SETTINGS}
+    known = set(settings["materials"]["skin_types"])
+    for name in grid["skin_type"]:
+        if name not in known:
+            raise SweepError(path, "grid.skin_type", f"unknown skin type {name!r} (expected one of {sorted(known)})")
+    zone = settings["stages"]["closure_zone"]
+    for k, v in zone.items():
+        if v > 1:
+            raise SweepError(path, f"stages.closure_zone.{k}", f"expected a fraction in (0, 1], got {v!r}")
+    return Sweep(
+        path=str(path),
+        name=str(data.get("name") or Path(str(path)).stem),
+        grid=grid,
+        shapes=shapes,
+        exclude=list(exclude),
+        **settings,
+    )
+
+
+def load_sweep(path: str | Path) -> Sweep:
+    """Read and validate a sweep YAML file."""
+    p = Path(path)
+    try:
+        text = p.read_text()
+    except OSError as err:
+        raise SweepError(p, "", f"cannot read file ({err.strerror})") from None
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as err:
+        mark = getattr(err, "problem_mark", None)
+        where = f"line {mark.line + 1}" if mark is not None else "YAML"
+        problem = getattr(err, "problem", None) or "invalid YAML"
+        raise SweepError(p, where, f"YAML syntax error: {problem}") from None
+    return parse_sweep(data, str(p))
+
+
+# -- exclusion rules: a tiny, safe expression language over manifest columns -------------
+
+_RULE_NAMES = set(MANIFEST_COLUMNS) - {"job_index", "job_id", "geometry_id"}
+_ALLOWED = (
+    ast.Expression, ast.BoolOp, ast.And, ast.Or, ast.UnaryOp, ast.Not, ast.USub, ast.BinOp,
+    ast.Add, ast.Sub, ast.Mult, ast.Div, ast.Compare, ast.Lt, ast.LtE, ast.Gt, ast.GtE, ast.Eq,
+    ast.NotEq, ast.Name, ast.Load, ast.Constant,
+)  # fmt: skip
+
+
+def _compile_rule(path: str, key: str, rule: str) -> ast.Expression:
+    try:
+        tree = ast.parse(rule, mode="eval")
+    except SyntaxError:
+        raise SweepError(path, key, f"cannot parse rule {rule!r}") from None
+    for node in ast.walk(tree):
+        if not isinstance(node, _ALLOWED):
+            raise SweepError(path, key, f"unsupported syntax {type(node).__name__} in rule {rule!r}")
+        if isinstance(node, ast.Name) and node.id not in _RULE_NAMES:
+            raise SweepError(path, key, f"unknown name {node.id!r} in rule {rule!r} (expected manifest columns)")
+        if isinstance(node, ast.Constant) and not isinstance(node.value, (int, float, str)):
+            raise SweepError(path, key, f"unsupported constant {node.value!r} in rule {rule!r}")
+    return tree
+
+
+def _eval(node: ast.AST, df: pd.DataFrame) -> Any:
+    if isinstance(node, ast.Expression):
+        return _eval(node.body, df)
+    if isinstance(node, ast.Constant):
+        return node.value
+    if isinstance(node, ast.Name):
+        return df[node.id].to_numpy()
+    if isinstance(node, ast.BoolOp):
+        vals = [np.asarray(_eval(v, df), dtype=bool) for v in node.values]
+        op = np.logical_and if isinstance(node.op, ast.And) else np.logical_or
+        out = vals[0]
+        for v in vals[1:]:
+            out = op(out, v)
+        return out
+    if isinstance(node, ast.UnaryOp):
+        v = _eval(node.operand, df)
+        return np.logical_not(v) if isinstance(node.op, ast.Not) else -v
+    if isinstance(node, ast.BinOp):
+        a, b = _eval(node.left, df), _eval(node.right, df)
+        return {ast.Add: np.add, ast.Sub: np.subtract, ast.Mult: np.multiply, ast.Div: np.divide}[
+            type(node.op)
+        ](a, b)
+    if isinstance(node, ast.Compare):
+        ops = {
+            ast.Lt: np.less, ast.LtE: np.less_equal, ast.Gt: np.greater, ast.GtE: np.greater_equal,
+            ast.Eq: np.equal, ast.NotEq: np.not_equal,
+        }  # fmt: skip
+        left, out = _eval(node.left, df), None
+        for op, comp in zip(node.ops, node.comparators):
+            right = _eval(comp, df)
+            res = np.asarray(ops[type(op)](left, right), dtype=bool)
+            out = res if out is None else np.logical_and(out, res)
+            left = right
+        return out
+    raise AssertionError(f"unreachable: {type(node).__name__}")  # _compile_rule rejects the rest
+
+
+# -- expansion ---------------------------------------------------------------------------
+
+
+def canonical_hash(params: dict[str, Any]) -> str:
+    """16 hex chars of sha256 over the sorted, type-normalised parameters (floats as repr)."""
+    norm = {
+        k: (float(v) if _is_number(v) else v)
+        for k, v in params.items()
+        if not (isinstance(v, float) and math.isnan(v))
+    }
+    blob = json.dumps(norm, sort_keys=True, separators=(",", ":"))
+    return hashlib.sha256(blob.encode()).hexdigest()[:16]
+
+
+def _derive(df: pd.DataFrame) -> pd.DataFrame:
+    td = df["dermal_thickness_mm"]
+    df["subcutis_thickness_mm"] = df["subcutis_thickness_factor"] * td
+    df["total_thickness_mm"] = td + df["subcutis_thickness_mm"]
+    df["patch_half_length_mm"] = df["patch_size_factor"] * df["total_thickness_mm"]
+    w = df["wound_width_factor"] * df["patch_half_length_mm"]
+    df["wound_width_mm"] = w
+    a = df["wound_aspect_factor"]
+    # Cylinder axis a*w above the surface, radius through the surface edges at x = 0 and w.
+    cyl_depth = np.sqrt((w / 2) ** 2 + (a * w) ** 2) - a * w
+    wedge_depth = df["wound_depth_factor"] * df["total_thickness_mm"]
+    df["wound_depth_mm"] = np.where(df["wound_shape"] == "cylindrical", cyl_depth, wedge_depth)
+    return df
+
+
+def expand(sweep: Sweep) -> pd.DataFrame:
+    """Expand a sweep into the manifest (one row per job, geometry-major stable order)."""
+    rows = []
+    for shape in sorted(sweep.shapes):
+        axis = SHAPE_AXES[shape]
+        axes = [sweep.grid[k] for k in GRID_AXES[:5]] + [sweep.shapes[shape][axis]]
+        axes += [sweep.grid["skin_type"], sweep.grid["orientation_deg"]]
+        names = [*GRID_AXES[:5], axis, "skin_type", "orientation_deg"]
+        for values in itertools.product(*axes):
+            row = dict(zip(names, values))
+            row["wound_shape"] = shape
+            rows.append(row)
+    df = pd.DataFrame(rows)
+    for axis in SHAPE_AXES.values():
+        if axis not in df:
+            df[axis] = np.nan
+    df = _derive(df)
+    keep = np.ones(len(df), dtype=bool)
+    for i, rule in enumerate(sweep.exclude):
+        hit = _eval(_compile_rule(sweep.path, f"exclude[{i}]", rule), df)
+        keep &= ~np.broadcast_to(np.asarray(hit, dtype=bool), keep.shape)
+    df = df[keep].reset_index(drop=True)
+    if df.empty:
+        raise SweepError(sweep.path, "exclude", "the grid expands to zero jobs")
+    job_keys = [*GEOMETRY_KEYS, "skin_type", "orientation_deg"]
+    records = df[job_keys].to_dict("records")
+    df["job_id"] = [canonical_hash(r) for r in records]
+    df["geometry_id"] = [canonical_hash({k: r[k] for k in GEOMETRY_KEYS}) for r in records]
+    df["job_index"] = np.arange(len(df), dtype=np.int64)
+    if df["job_id"].duplicated().any():
+        raise SweepError(sweep.path, "grid", "duplicate jobs (two axis values give the same job)")
+    return df[list(MANIFEST_COLUMNS)]
+
+
+def load_run(run_dir: str | Path) -> Run:
+    """Open a run directory: its sweep copy and its manifest."""
+    rd = Path(run_dir)
+    manifest_path, sweep_path = rd / "manifest.parquet", rd / "sweep.yaml"
+    if not manifest_path.is_file() or not sweep_path.is_file():
+        raise StoreError(f"{rd}: not a run directory (run `woundsweep generate SWEEP.yaml --out {rd}`)")
+    try:
+        manifest = pd.read_parquet(manifest_path)
+    except Exception as err:  # pyarrow raises several types for damaged files
+        raise StoreError(f"{manifest_path}: unreadable manifest ({type(err).__name__})") from None
+    missing = [c for c in MANIFEST_COLUMNS if c not in manifest.columns]
+    if missing:
+        raise StoreError(f"{manifest_path}: missing columns {missing}")
+    return Run(rd, load_sweep(sweep_path), manifest)

@@ -19,7 +19,10 @@ __all__ = ["COMMANDS", "main"]
 
 # name -> (module, one-line help). Only commands that work are listed.
 COMMANDS: dict[str, tuple[str, str]] = {
-    "generate": ("woundsweep.commands.generate", "Expand a sweep YAML into RUN_DIR/manifest.parquet."),
+    "generate": (
+        "woundsweep.commands.generate",
+        "Expand a sweep YAML into RUN_DIR/manifest.parquet.",
+    ),
 }
 
 

@@ -207,16 +207,16 @@ def _merge(path: str, key: str, default: Any, given: Any) -> Any:
                 if base is None:
                     missing = set(template) - set(params or {})
                     if missing:
-                        raise SweepError(
-                            path, f"{key}.{name}", f"missing keys {sorted(missing)}"
-                        )
+                        raise SweepError(path, f"{key}.{name}", f"missing keys {sorted(missing)}")
                     base = template
                 out[name] = _merge(path, f"{key}.{name}", base, params)
             return out
         unknown = set(given) - set(default)
         if unknown:
             raise SweepError(
-                path, f"{key}.{sorted(unknown)[0]}", f"unknown key (expected one of {sorted(default)})"
+                path,
+                f"{key}.{sorted(unknown)[0]}",
+                f"unknown key (expected one of {sorted(default)})",
             )
         return {k: _merge(path, f"{key}.{k}", default[k], given.get(k)) for k in default}
     if isinstance(default, list):
@@ -265,7 +265,9 @@ def parse_sweep(data: Any, path: str = "<sweep>") -> Sweep:
     shapes: dict[str, dict[str, list[float]]] = {}
     for shape in sorted(shapes_in):
         if shape not in SHAPE_AXES:
-            raise SweepError(path, f"shapes.{shape}", f"unknown wound shape (expected one of {list(SHAPE_AXES)})")
+            raise SweepError(
+                path, f"shapes.{shape}", f"unknown wound shape (expected one of {list(SHAPE_AXES)})"
+            )
         spec = shapes_in[shape]
         axis = SHAPE_AXES[shape]
         if not isinstance(spec, dict) or set(spec) != {axis}:
@@ -274,7 +276,9 @@ def parse_sweep(data: Any, path: str = "<sweep>") -> Sweep:
         shapes[shape] = {axis: _axis(path, f"shapes.{shape}.{axis}", spec[axis], kind=kind)}
     if "wedge" in shapes and max(shapes["wedge"]["wound_depth_factor"]) >= 1:
         raise SweepError(
-            path, "shapes.wedge.wound_depth_factor", "expected factors below 1 (the depth is a fraction of the total thickness)"
+            path,
+            "shapes.wedge.wound_depth_factor",
+            "expected factors below 1 (the depth is a fraction of the total thickness)",
         )
 
     exclude = data.get("exclude") or []
@@ -287,11 +291,17 @@ def parse_sweep(data: Any, path: str = "<sweep>") -> Sweep:
     known = set(settings["materials"]["skin_types"])
     for name in grid["skin_type"]:
         if name not in known:
-            raise SweepError(path, "grid.skin_type", f"unknown skin type {name!r} (expected one of {sorted(known)})")
+            raise SweepError(
+                path,
+                "grid.skin_type",
+                f"unknown skin type {name!r} (expected one of {sorted(known)})",
+            )
     zone = settings["stages"]["closure_zone"]
     for k, v in zone.items():
         if v > 1:
-            raise SweepError(path, f"stages.closure_zone.{k}", f"expected a fraction in (0, 1], got {v!r}")
+            raise SweepError(
+                path, f"stages.closure_zone.{k}", f"expected a fraction in (0, 1], got {v!r}"
+            )
     return Sweep(
         path=str(path),
         name=str(data.get("name") or Path(str(path)).stem),
@@ -336,9 +346,13 @@ def _compile_rule(path: str, key: str, rule: str) -> ast.Expression:
         raise SweepError(path, key, f"cannot parse rule {rule!r}") from None
     for node in ast.walk(tree):
         if not isinstance(node, _ALLOWED):
-            raise SweepError(path, key, f"unsupported syntax {type(node).__name__} in rule {rule!r}")
+            raise SweepError(
+                path, key, f"unsupported syntax {type(node).__name__} in rule {rule!r}"
+            )
         if isinstance(node, ast.Name) and node.id not in _RULE_NAMES:
-            raise SweepError(path, key, f"unknown name {node.id!r} in rule {rule!r} (expected manifest columns)")
+            raise SweepError(
+                path, key, f"unknown name {node.id!r} in rule {rule!r} (expected manifest columns)"
+            )
         if isinstance(node, ast.Constant) and not isinstance(node.value, (int, float, str)):
             raise SweepError(path, key, f"unsupported constant {node.value!r} in rule {rule!r}")
     return tree
@@ -449,7 +463,9 @@ def load_run(run_dir: str | Path) -> Run:
     rd = Path(run_dir)
     manifest_path, sweep_path = rd / "manifest.parquet", rd / "sweep.yaml"
     if not manifest_path.is_file() or not sweep_path.is_file():
-        raise StoreError(f"{rd}: not a run directory (run `woundsweep generate SWEEP.yaml --out {rd}`)")
+        raise StoreError(
+            f"{rd}: not a run directory (run `woundsweep generate SWEEP.yaml --out {rd}`)"
+        )
     try:
         manifest = pd.read_parquet(manifest_path)
     except Exception as err:  # pyarrow raises several types for damaged files

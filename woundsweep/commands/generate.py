@@ -26,7 +26,9 @@ def _existing_sweep(run_dir: Path) -> dict | None:
         return {"unreadable": True}
 
 
-def generate(sweep_path: str | Path, run_dir: str | Path, *, force: bool = False) -> tuple[int, bool]:
+def generate(
+    sweep_path: str | Path, run_dir: str | Path, *, force: bool = False
+) -> tuple[int, bool]:
     """Write the manifest, the sweep copy and provenance; return (jobs, written).
 
     Re-generating from an equivalent sweep (same grid and settings, whatever the formatting)
@@ -71,7 +73,9 @@ def generate(sweep_path: str | Path, run_dir: str | Path, *, force: bool = False
     "--out", "run_dir", required=True, type=click.Path(file_okay=False, path_type=Path),
     help="Run directory to create (manifest.parquet, sweep.yaml, provenance.json).",
 )  # fmt: skip
-@click.option("--force", is_flag=True, help="Replace the manifest of a run made from another sweep.")
+@click.option(
+    "--force", is_flag=True, help="Replace the manifest of a run made from another sweep."
+)
 def cmd(sweep_file: Path, run_dir: Path, force: bool) -> None:
     """Expand SWEEP_FILE into one job per parameter combination.
 

@@ -49,7 +49,12 @@ if [[ ! -x "$VENV/bin/python" ]]; then
     /usr/bin/python3 -m venv --system-site-packages "$VENV"
 fi
 echo "setup: installing woundsweep into $VENV"
-"$VENV/bin/python" -m pip install -q --upgrade "pip>=23"
-"$VENV/bin/python" -m pip install -q "numpy<2" "pyarrow<21" -e ".[test]"
+log="$VENV/pip-install.log"
+if ! { "$VENV/bin/python" -m pip install -q --upgrade "pip>=23" &&
+       "$VENV/bin/python" -m pip install -q "numpy<2" "pyarrow<21" -e ".[test]"; } >"$log" 2>&1; then
+    tail -n 20 "$log" >&2
+    echo "setup: pip install failed (full log: $log)" >&2
+    exit 1
+fi
 "$VENV/bin/python" -c "import dolfinx, gmsh, xgboost, pyarrow, h5py; print('setup: dolfinx', dolfinx.__version__, 'gmsh', gmsh.__version__)"
 echo "$want" > "$STAMP"

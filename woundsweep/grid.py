@@ -134,6 +134,13 @@ DEFAULTS: dict[str, Any] = {
         "learning_rate": 0.1,
         "early_stopping_rounds": 20,
         "seed": 0,
+        "nthread": 2,
+        "train_fraction": 0.63,
+        "validation_fraction": 0.27,
+        "min_child_weight": 1.0,
+        "subsample": 1.0,
+        "colsample_bytree": 1.0,
+        "reg_lambda": 1.0,
     },
 }
 SETTINGS = tuple(DEFAULTS)

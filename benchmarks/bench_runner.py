@@ -1,0 +1,126 @@
+"""Runner overhead and throughput on sweeps/demo.yaml.
+
+Prints:
+- per-job overhead of the runner: a job whose solve exits at once (test-only fault switch
+  ``exit:0``: subprocess start, interpreter and woundsweep imports, classification, the store
+  write of its rows), measured through the real runner, against the median wall time of a real
+  demo job;
+- the store write alone for a real solver output (fields "final");
+- jobs per hour with 1 and with 2 workers on the same jobs (a fresh RUN_DIR each, after one
+  warm-up job so both start from a warm JIT cache).
+
+    python benchmarks/bench_runner.py              # shard 0/4 of the demo (8 jobs)
+    python benchmarks/bench_runner.py --shards 1   # the whole demo (32 jobs)
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import pandas as pd
+
+ROOT = Path(__file__).resolve().parent.parent
+WS = [sys.executable, "-m", "woundsweep"]
+
+
+def _generate(rd: Path) -> None:
+    subprocess.run(
+        [*WS, "generate", str(ROOT / "sweeps" / "demo.yaml"), "--out", str(rd)],
+        check=True,
+        stdout=subprocess.DEVNULL,
+    )
+
+
+def _run(rd: Path, *args: str, env: dict[str, str] | None = None) -> float:
+    t0 = time.perf_counter()
+    subprocess.run(
+        [*WS, "run", str(rd), "--no-progress", *args],
+        check=True,
+        env=env,
+        stdout=subprocess.DEVNULL,
+    )
+    return time.perf_counter() - t0
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--shards", type=int, default=4, help="run shard 0 of this many (default 4)")
+    ap.add_argument("--stages", default="1-6")
+    args = ap.parse_args()
+    shard = f"0/{args.shards}"
+    with tempfile.TemporaryDirectory(prefix="bench-runner-") as tmp:
+        tmp_path = Path(tmp)
+
+        # 1. Pure runner overhead: every job exits 0 at once (then is classified "crashed":
+        #    no output), through the real runner with one worker.
+        rd = tmp_path / "overhead"
+        _generate(rd)
+        env = dict(os.environ, WOUNDSWEEP_FAULT="exit:0")
+        wall = _run(rd, "--shard", shard, "--workers", "1", "--retries", "0", "--no-warmup", env=env)
+        df = pd.read_parquet(rd / "results").drop_duplicates("job_id")
+        n = len(df)
+        per_job = df["job_wall_time_s"].median()
+        print(f"runner overhead: {n} empty jobs in {wall:.1f} s = {wall / n:.2f} s/job end to end;")
+        print(f"  median subprocess wall (start, imports, exit) {per_job:.2f} s/job")
+
+        # 2. Warm the JIT cache with one real job, untimed.
+        warm = tmp_path / "warm"
+        _generate(warm)
+        _run(warm, "--shard", f"0/{32}", "--workers", "1", "--stages", args.stages)
+
+        # 3. Throughput with 1 and 2 workers on the same jobs.
+        rates = {}
+        for k in (1, 2):
+            rd = tmp_path / f"k{k}"
+            _generate(rd)
+            wall = _run(rd, "--shard", shard, "--workers", str(k), "--stages", args.stages)
+            df = pd.read_parquet(rd / "results")
+            jobs = df.drop_duplicates("job_id")
+            rates[k] = len(jobs) / wall * 3600
+            solve = jobs["job_wall_time_s"].median()
+            stage_time = df.groupby("job_id")["time_s"].sum().median()
+            classes = jobs["failure_class"].value_counts().to_dict()
+            print(
+                f"{k} worker(s): {len(jobs)} jobs in {wall:.0f} s = {rates[k]:.0f} jobs/h; "
+                f"median job wall {solve:.1f} s (of which Newton stages {stage_time:.1f} s); {classes}"
+            )
+            if k == 1:
+                print(
+                    f"  overhead / median job: {per_job:.2f} / {solve:.1f} s = "
+                    f"{100 * per_job / solve:.1f}% (target < 10%)"
+                )
+                from woundsweep.grid import load_run
+                from woundsweep.store import JobOutcome, Store
+
+                # Store write alone, for one real result re-solved to a scratch file.
+                row = load_run(rd).manifest.iloc[int(jobs["job_index"].iloc[0])]
+                out = tmp_path / "one.h5"
+                subprocess.run(
+                    [*WS, "solve", str(rd), "--job", str(int(row["job_index"])), "--stages",
+                     args.stages, "--out", str(out)],
+                    stdout=subprocess.DEVNULL, check=False,
+                )  # fmt: skip
+                if out.exists():
+                    from woundsweep.store import read_solver_output
+
+                    a, b = (int(x) for x in args.stages.split("-"))
+                    so = read_solver_output(out, row["job_id"], (a, b))
+                    oc = JobOutcome("converged", "", 0, 1, 1.0, 1.0, 1.0, 1.0, None, 0.0, 1.0, so)
+                    scratch = tmp_path / "scratch"
+                    scratch.mkdir()
+                    t0 = time.perf_counter()
+                    for _ in range(5):
+                        Store(scratch).write_job(row.to_dict(), oc, (a, b), "final", "0/1")
+                    print(f"  store write (rows + final fields + mesh): {(time.perf_counter() - t0) / 5 * 1000:.0f} ms/job")
+        print(f"speedup 2 vs 1 worker: {rates[2] / rates[1]:.2f}x (target >= 1.7x)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

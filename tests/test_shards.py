@@ -1,0 +1,122 @@
+"""Shards: an exact, deterministic, balanced partition of the manifest."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from woundsweep.geometry import GeometrySpec, build_mesh
+from woundsweep.grid import expand, load_sweep
+from woundsweep.shards import Shard, estimate_cost, parse_shard, partition, shard_jobs
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+@pytest.fixture(scope="module")
+def paper() -> pd.DataFrame:
+    return expand(load_sweep(ROOT / "sweeps" / "paper.yaml"))
+
+
+@pytest.fixture(scope="module")
+def demo() -> pd.DataFrame:
+    return expand(load_sweep(ROOT / "sweeps" / "demo.yaml"))
+
+
+def test_cost_estimate_ranks_real_meshes(paper: pd.DataFrame) -> None:
+    """The estimate orders geometries as their real gmsh cell counts do."""
+    geo = paper.drop_duplicates("geometry_id")
+    sample = pd.concat(
+        [
+            geo[geo["mesh_size_factor"] == 0.3].sample(10, random_state=1),
+            geo.sample(4, random_state=2),
+        ]
+    )
+    cells = [build_mesh(GeometrySpec.from_row(r)).info["cells"] for _, r in sample.iterrows()]
+    est = estimate_cost(sample)
+    rho = pd.Series(est).corr(pd.Series(cells, dtype=float), method="spearman")
+    assert rho > 0.8, (rho, list(zip(est, cells)))
+    # Every job of a geometry gets its geometry's estimate.
+    one = paper[paper["geometry_id"] == sample["geometry_id"].iloc[0]]
+    assert len(one) == 9 and len(set(estimate_cost(one))) == 1
+
+
+def test_finer_mesh_factor_costs_more(paper: pd.DataFrame) -> None:
+    key = ["geometry_id", "skin_type", "orientation_deg"]
+    df = paper.assign(cost=estimate_cost(paper)).drop(columns=key + ["job_id", "job_index"])
+    others = [c for c in df.columns if c not in ("mesh_size_factor", "cost")]
+    for _, g in df.groupby(others, dropna=False):
+        g = g.drop_duplicates("mesh_size_factor").sort_values("mesh_size_factor")
+        assert len(g) == 3
+        assert np.all(np.diff(g["cost"].to_numpy()) > 0)
+
+
+@pytest.mark.parametrize("n", [1, 2, 3, 7, 64, 1296, 1297, 11_664])
+def test_partition_is_exact(paper: pd.DataFrame, n: int) -> None:
+    shards = partition(paper, n)
+    assert len(shards) == n
+    allj = np.concatenate(shards)
+    assert len(allj) == len(paper) == 11_664  # no job twice ...
+    assert np.array_equal(np.sort(allj), np.arange(11_664))  # ... and none missing
+    for s in shards:
+        assert np.all(np.diff(s) > 0)  # each shard in manifest order
+    if n == 11_664:
+        assert all(len(s) == 1 for s in shards)
+
+
+@pytest.mark.parametrize("n", [2, 5, 64, 1296])
+def test_geometries_stay_together(paper: pd.DataFrame, n: int) -> None:
+    owner = np.empty(len(paper), dtype=np.int64)
+    for s, idx in enumerate(partition(paper, n)):
+        owner[idx] = s
+    per_geo = pd.Series(owner).groupby(paper["geometry_id"].to_numpy()).nunique()
+    assert (per_geo == 1).all()
+    if n == 1296:  # as many shards as geometries: exactly one geometry (9 jobs) each
+        assert sorted(np.bincount(owner).tolist()) == [9] * 1296
+
+
+def test_more_shards_than_geometries_splits_jobs(demo: pd.DataFrame) -> None:
+    shards = partition(demo, 10)  # 8 geometries, 32 jobs
+    assert all(len(s) > 0 for s in shards)
+    assert sorted(np.concatenate(shards).tolist()) == list(range(32))
+
+
+@pytest.mark.parametrize("n", [2, 3, 8, 50])
+def test_balanced_within_list_scheduling_bound(paper: pd.DataFrame, n: int) -> None:
+    cost = estimate_cost(paper)
+    geo_cost = pd.Series(cost).groupby(paper["geometry_id"].to_numpy()).sum()
+    loads = np.array([cost[s].sum() for s in partition(paper, n)])
+    assert loads.sum() == pytest.approx(cost.sum())
+    # Greedy lightest-shard assignment: no shard exceeds the mean by more than one group.
+    assert loads.max() <= cost.sum() / n + geo_cost.max() + 1e-9
+    if n <= 8:  # with many groups per shard, the spread is far below one group's cost
+        assert loads.max() - loads.min() <= geo_cost.max()
+
+
+def test_partition_independent_of_row_order(paper: pd.DataFrame) -> None:
+    shuffled = paper.sample(frac=1.0, random_state=3)
+    for a, b in zip(partition(paper, 7), partition(shuffled, 7)):
+        assert np.array_equal(a, b)
+
+
+def test_shard_jobs_rows(demo: pd.DataFrame) -> None:
+    parts = [shard_jobs(demo, Shard(i, 3)) for i in range(3)]
+    assert sum(len(p) for p in parts) == 32
+    assert set().union(*(set(p["job_id"]) for p in parts)) == set(demo["job_id"])
+    assert all(p["job_index"].is_monotonic_increasing for p in parts)
+
+
+@pytest.mark.parametrize(
+    "text,expected", [("0/1", Shard(0, 1)), ("3/4", Shard(3, 4)), (" 2 / 10 ", Shard(2, 10))]
+)
+def test_parse_shard(text: str, expected: Shard) -> None:
+    assert parse_shard(text) == expected
+    assert str(expected) == text.replace(" ", "")
+
+
+@pytest.mark.parametrize("text", ["4/4", "1/0", "-1/2", "a/b", "3", "1/2/3"])
+def test_parse_shard_rejects(text: str) -> None:
+    with pytest.raises(ValueError, match="shard"):
+        parse_shard(text)

@@ -1,0 +1,76 @@
+"""``woundsweep status RUN_DIR [--json]``: what the store holds, and what is left."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import click
+
+from ..grid import load_run
+from ..store import read_results, summarize
+
+__all__ = ["cmd", "format_status"]
+
+
+def _duration(seconds: float | None) -> str:
+    if seconds is None:
+        return "n/a"
+    if seconds < 120:
+        return f"{seconds:.0f} s"
+    if seconds < 7200:
+        return f"{seconds / 60:.1f} min"
+    return f"{seconds / 3600:.1f} h"
+
+
+def format_status(s: dict[str, Any]) -> str:
+    """The human-readable table of a ``store.summarize`` record."""
+    lines = [
+        f"jobs: {s['jobs_done']} of {s['jobs_total']} stored, {s['jobs_pending']} pending"
+        f" ({s['rows']} rows, {s['attempts']} attempts)"
+    ]
+    if s["orphan_jobs"]:
+        lines.append(f"  {s['orphan_jobs']} stored jobs are not in the manifest (ignored)")
+    lines.append("by failure class:")
+    for cls, n in s["by_failure_class"].items():
+        extra = ""
+        if cls == "not-converged" and s["not_converged_at_stage"]:
+            extra = (
+                "  (at stage "
+                + ", ".join(f"{k}: {v}" for k, v in s["not_converged_at_stage"].items())
+                + ")"
+            )
+        lines.append(f"  {cls:<14} {n:>7}{extra}")
+    if s["by_stage"]:
+        statuses = [st for st in next(iter(s["by_stage"].values()))]
+        lines.append("by stage:  " + "".join(f"{st:>22}" for st in statuses))
+        for stage, counts in s["by_stage"].items():
+            lines.append(f"  stage {stage:<3}" + "".join(f"{counts[st]:>22}" for st in statuses))
+    rate = s["throughput_jobs_per_hour"]
+    lines.append(
+        f"throughput: {'n/a' if rate is None else f'{rate:.1f} jobs/h'}"
+        f" over {_duration(s['wall_span_s'])}"
+    )
+    lines.append(
+        f"CPU time: {_duration(s['cpu_time_used_s'])} used,"
+        f" about {_duration(s['cpu_time_left_estimate_s'])} left (cost-weighted estimate)"
+    )
+    return "\n".join(lines)
+
+
+@click.command("status")
+@click.argument("run_dir", type=click.Path(file_okay=False, path_type=Path))
+@click.option("--json", "as_json", is_flag=True, help="Print the counts as JSON.")
+def cmd(run_dir: Path, as_json: bool) -> None:
+    """Counts by failure class and by stage, throughput, CPU time used and left.
+
+    Every result file is validated; a corrupt one is named on one line (rerun
+    `woundsweep run` to move it aside and redo the job).
+    """
+    run = load_run(run_dir)
+    s = summarize(run.manifest, read_results(run.run_dir))
+    if as_json:
+        click.echo(json.dumps({"run_dir": str(run.run_dir), **s}, indent=2))
+    else:
+        click.echo(format_status(s))

@@ -9,6 +9,7 @@ import sys
 
 import gmsh
 import numpy as np
+import pandas as pd
 import pytest
 
 from woundsweep.errors import GeometryError
@@ -323,7 +324,7 @@ def test_cell_cap_holds_for_extreme_paper_geometries() -> None:
             dermal_thickness_mm=0.5,
         ),  # fmt: skip
     ]
-    rows = [r for _, r in __import__("pandas").concat(picks).iterrows()]
+    rows = [r for _, r in pd.concat(picks).iterrows()]
     rows = [r for r in rows if r["wound_shape"] == "wedge" and r["wound_depth_factor"] == 0.7
             or r["wound_shape"] == "cylindrical" and r["wound_aspect_factor"] == 0.0]  # fmt: skip
     assert len(rows) == 4

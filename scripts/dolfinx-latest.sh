@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # Run woundsweep's DOLFINx-dependent tests on the newest Debian DOLFINx (sid: 0.11).
 #
-#   scripts/dolfinx-latest.sh                  build the sid root if needed, run the fem tests + a demo solve
+#   scripts/dolfinx-latest.sh                  build the sid root if needed, run the fem tests + a demo solve,
+#                                              then the same demo job on the host DOLFINx: per-stage max and
+#                                              p99 von Mises must agree within 1 % (compare_stage_results.py)
 #   scripts/dolfinx-latest.sh --build-only     only build / update the root
 #   scripts/dolfinx-latest.sh --shell          interactive shell in the root (source tree at /src)
 #   scripts/dolfinx-latest.sh --run CMD ARGS   run one command in the root (e.g. --run python3 scripts/probes/x.py)
@@ -41,17 +43,23 @@ APT_OPTS=(-o Acquire::Check-Valid-Until=false -o APT::Install-Recommends=false -
 # Optional ones come from Debian where the suite has them, else as binary wheels from PyPI
 # (pip --only-binary, --break-system-packages inside the throw-away root): trixie has neither
 # python3-pyarrow nor python3-xgboost.
-PACKAGES=(python3-dolfinx-real python3-gmsh python3-numpy python3-pandas
+PACKAGES=(python3-dolfinx-real python3-numpy python3-pandas
           python3-h5py python3-yaml python3-click python3-tqdm python3-matplotlib python3-sklearn
           python3-scipy python3-pytest python3-pytest-timeout
-          libopenblas0-serial ca-certificates)
+          libopenblas0-serial ca-certificates python3-pip
+          libglu1-mesa libxcursor1 libxinerama1 libxft2 libxrender1)
 OPTIONAL_PACKAGES=(python3-pyarrow python3-xgboost)
+# gmsh comes from PyPI as on the host (Debian's python3-gmsh lacks the Netgen optimiser that
+# woundsweep.geometry enables), at the host venv's version so both DOLFINx versions solve the
+# same mesh (geometry.build_mesh is deterministic for one gmsh version).
+host_gmsh=$("$SRC/.venv/bin/python" -c 'import gmsh; print(gmsh.__version__)' 2>/dev/null || true)
+WHEELS=("gmsh${host_gmsh:+==$host_gmsh}")
 
 say() { echo "dolfinx-latest: $*" >&2; }
 skip() { say "skipped: $*"; exit "$SKIP"; }
 elapsed() { echo $(($(date +%s) - $1)); }
 
-mode=test
+mode="test"
 cmd=()
 pytest_extra=()
 while (($#)); do
@@ -60,7 +68,7 @@ while (($#)); do
         --shell) mode=shell ;;
         --run) mode=run; shift; cmd=("$@"); break ;;
         --) shift; pytest_extra=("$@"); break ;;
-        -h|--help) sed -n '2,22p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+        -h|--help) sed -n '2,27p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
         *) say "unknown argument: $1 (see --help)"; exit 2 ;;
     esac
     shift
@@ -72,7 +80,13 @@ for tool in chroot unshare setpriv flock mount umount timeout; do
     command -v "$tool" >/dev/null 2>&1 || skip "no $tool on PATH"
 done
 if [[ ! -f "$BASE_STAMP" ]] && ! command -v debootstrap >/dev/null 2>&1; then
-    skip "no debootstrap (apt-get install debootstrap) and no ready root at $ROOT"
+    if command -v apt-get >/dev/null 2>&1; then
+        say "installing debootstrap"
+        DEBIAN_FRONTEND=noninteractive apt-get install -y -qq debootstrap >/dev/null 2>&1 ||
+            { apt-get update -qq >/dev/null 2>&1 &&
+              DEBIAN_FRONTEND=noninteractive apt-get install -y -qq debootstrap >/dev/null 2>&1; } || true
+    fi
+    command -v debootstrap >/dev/null 2>&1 || skip "no debootstrap and no ready root at $ROOT"
 fi
 unshare --mount --pid --fork --propagation private true 2>/dev/null ||
     skip "cannot create mount + PID namespaces (unshare --mount --pid) here"
@@ -104,7 +118,7 @@ build_root() {
 install_packages() {
     local t0 want
     t0=$(date +%s)
-    want=$(printf '%s\n' "${PACKAGES[@]}" "${OPTIONAL_PACKAGES[@]}" | sha256sum | cut -c1-16)
+    want=$(printf '%s\n' "${PACKAGES[@]}" "${OPTIONAL_PACKAGES[@]}" "${WHEELS[@]}" | sha256sum | cut -c1-16)
     [[ -f "$PKG_STAMP" && "$(cat "$PKG_STAMP")" == "$want" ]] && return 0
     say "installing ${#PACKAGES[@]} packages into the root (log: $BUILD_LOG)"
     cp -L /etc/resolv.conf "$ROOT/etc/resolv.conf"
@@ -113,7 +127,8 @@ install_packages() {
     rm -f "$ROOT/etc/ssl/host-ca-bundle.crt"
     [[ -n $ca && -f $ca ]] && cp -L "$ca" "$ROOT/etc/ssl/host-ca-bundle.crt"
     # apt/dpkg need /proc and /dev/null; mount them privately for just this step.
-    if ! unshare -m --propagation private bash -c '
+    # shellcheck disable=SC2016  # the script is expanded by the inner bash
+    if ! PKGS="${PACKAGES[*]}" OPT_PKGS="${OPTIONAL_PACKAGES[*]}" WHEELS="${WHEELS[*]}" unshare -m --propagation private bash -c '
             set -e
             root=$1; shift
             mount -t proc proc "$root/proc"
@@ -121,17 +136,24 @@ install_packages() {
             export DEBIAN_FRONTEND=noninteractive LC_ALL=C.UTF-8
             chroot "$root" dpkg --configure -a  # finish an install that was interrupted
             chroot "$root" apt-get "$@" -q update
-            optional=() wheels=()
-            for p in '"${OPTIONAL_PACKAGES[*]}"'; do
+            optional=()
+            read -r -a wheels <<<"$WHEELS"
+            for p in $OPT_PKGS; do
                 if chroot "$root" apt-cache show "$p" >/dev/null 2>&1; then optional+=("$p"); else wheels+=("${p#python3-}"); fi
             done
-            ((${#wheels[@]} == 0)) || optional+=(python3-pip)
-            chroot "$root" apt-get "$@" -y -q install '"${PACKAGES[*]}"' "${optional[@]}"
+            chroot "$root" apt-get "$@" -y -q install $PKGS "${optional[@]}"
+            # The Debian gmsh (no Netgen) must not shadow the wheel: pip would take it as installed.
+            if chroot "$root" dpkg-query -W python3-gmsh >/dev/null 2>&1; then
+                chroot "$root" apt-get "$@" -y -q purge python3-gmsh
+            fi
             if ((${#wheels[@]})); then
-                echo "not in this suite, installing wheels: ${wheels[*]}"
-                cert=() && [[ -f $root/etc/ssl/host-ca-bundle.crt ]] && cert=(--cert /etc/ssl/host-ca-bundle.crt)
-                env -u PIP_FIND_LINKS -u PIP_CERT chroot "$root" python3 -m pip install -q \
-                    --break-system-packages --only-binary=:all: "${cert[@]}" "${wheels[@]}"
+                echo "installing wheels: ${wheels[*]}"
+                cert=()
+                [[ -f $root/etc/ssl/host-ca-bundle.crt ]] && cert=(--cert /etc/ssl/host-ca-bundle.crt)
+                # Host paths in PIP_*/SSL_* variables mean nothing inside the root: clear them.
+                env -u PIP_FIND_LINKS -u PIP_CERT -u SSL_CERT_FILE -u REQUESTS_CA_BUNDLE -u CURL_CA_BUNDLE \
+                    chroot "$root" python3 -m pip install -q --break-system-packages \
+                    --only-binary=:all: "${cert[@]}" "${wheels[@]}"
             fi
             chroot "$root" apt-get clean
         ' _ "$ROOT" "${APT_OPTS[@]}" >>"$BUILD_LOG" 2>&1; then
@@ -153,14 +175,17 @@ install_packages() {
 [[ -f "$BASE_STAMP" ]] || build_root
 install_packages
 if [[ $mode == build ]]; then
-    say "root ready: python3-dolfinx-real $(chroot "$ROOT" dpkg-query -W -f='${Version}' python3-dolfinx-real)"
+    say "root ready: python3-dolfinx-real $(chroot "$ROOT" dpkg-query -W -f="\${Version}" python3-dolfinx-real)"
     exit 0
 fi
 
 # ---- what runs inside the root (mode "test"): fem tests, then one demo job through all stages
+# "A-B" covering every stage the solver implements (all six once they exist).
+STAGES_PY='from woundsweep.stages import IMPLEMENTED_STAGES as s; print(f"{min(s)}-{max(s)}")'
 in_root=$(cat <<'IN_ROOT'
 set -uo pipefail
 cd /src
+STAGES_PY=$1; shift
 python3 -c 'import dolfinx, sys, numpy; print(f"dolfinx-latest: DOLFINx {dolfinx.__version__}, Python {sys.version.split()[0]}, numpy {numpy.__version__}")'
 t0=$(date +%s)
 rc=0
@@ -172,12 +197,13 @@ python3 -m pytest -m "$markers" -p no:cacheprovider -q -rfE "$@" || rc=$?
 [[ $rc -eq 5 ]] && { echo "dolfinx-latest: no fem tests collected"; rc=0; }
 echo "dolfinx-latest: fem tests: $(($(date +%s) - t0)) s, status $rc"
 if [[ ${DOLFINX_LATEST_DEMO:-1} != 0 ]]; then
+    STAGES=$(python3 -c "$STAGES_PY" 2>/dev/null || echo 1-6)
     if python3 -c 'import sys; from woundsweep.cli import COMMANDS; sys.exit("solve" not in COMMANDS)'; then
         t0=$(date +%s)
         drc=0
         woundsweep generate sweeps/demo.yaml --out /out/run-latest >/dev/null &&
-            woundsweep solve /out/run-latest --job 0 --stages 1-6 --out /out/job0-latest.h5 || drc=$?
-        echo "dolfinx-latest: demo solve (job 0, stages 1-6): $(($(date +%s) - t0)) s, status $drc"
+            woundsweep solve /out/run-latest --job 0 --stages "$STAGES" --out /out/job0-latest.h5 || drc=$?
+        echo "dolfinx-latest: demo solve (job 0, stages $STAGES): $(($(date +%s) - t0)) s, status $drc"
         ((rc == 0 && drc != 0)) && rc=$drc
     else
         echo "dolfinx-latest: demo solve skipped: woundsweep has no 'solve' command yet"
@@ -195,7 +221,7 @@ IN_ROOT
 # script, so killing the script kills the run.
 inner=$(cat <<'INNER'
 set -uo pipefail
-ROOT=$1; SRC=$2; OUT=$3; mode=$4; in_root=$5; limit=$6; shift 6
+ROOT=$1; SRC=$2; OUT=$3; mode=$4; in_root=$5; limit=$6; STAGES_PY=$7; shift 7
 mounted=()
 cleanup() {
     local i
@@ -216,13 +242,18 @@ m -t tmpfs -o mode=1777 tmp "$ROOT/tmp" || exit 77
 m --bind "$SRC" "$ROOT/src" || exit 77
 mount -o remount,bind,ro "$ROOT/src" || exit 77
 m --bind "$OUT" "$ROOT/out" || exit 77
-export HOME=/root LC_ALL=C.UTF-8 PYTHONPATH=/src PYTHONDONTWRITEBYTECODE=1 \
-       OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 \
-       OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 PATH=/usr/local/bin:/usr/bin:/bin:/usr/sbin:/sbin
+# A clean environment: host paths (PIP_*, SSL_CERT_FILE, PYTHON*, venvs) mean nothing in the
+# root. Passed through: CI and the project's own WOUNDSWEEP_* / DOLFINX_LATEST_* switches.
+envv=(HOME=/root LC_ALL=C.UTF-8 TERM="${TERM:-dumb}" PYTHONPATH=/src PYTHONDONTWRITEBYTECODE=1
+      PYTHONUNBUFFERED=1 OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1
+      OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 PATH=/usr/local/bin:/usr/bin:/bin:/usr/sbin:/sbin)
+while IFS= read -r name; do
+    envv+=("$name=${!name}")
+done < <(compgen -e | grep -E '^(CI|WOUNDSWEEP_[A-Z0-9_]+|DOLFINX_LATEST_[A-Z0-9_]+)$' || true)
 case $mode in
-    shell) chroot "$ROOT" bash -c 'cd /src && exec bash -i' ;;
-    run) timeout -k 30 "$limit" chroot "$ROOT" bash -c 'cd /src && exec "$@"' _ "$@" ;;
-    *) timeout -k 30 "$limit" chroot "$ROOT" bash -c "$in_root" _ "$@" ;;
+    shell) env -i "${envv[@]}" chroot "$ROOT" bash -c 'cd /src && exec bash -i' ;;
+    run) env -i "${envv[@]}" timeout -k 30 "$limit" chroot "$ROOT" bash -c 'cd /src && exec "$@"' _ "$@" ;;
+    *) env -i "${envv[@]}" timeout -k 30 "$limit" chroot "$ROOT" bash -c "$in_root" _ "$STAGES_PY" "$@" ;;
 esac
 INNER
 )
@@ -239,7 +270,7 @@ t0=$(date +%s)
 rc=0
 limit=${DOLFINX_LATEST_TIMEOUT:-1500}
 setpriv --pdeathsig KILL unshare --mount --pid --fork --kill-child --propagation private \
-    bash -c "$inner" _ "$ROOT" "$SRC" "$OUT" "$mode" "$in_root" "$limit" \
+    bash -c "$inner" _ "$ROOT" "$SRC" "$OUT" "$mode" "$in_root" "$limit" "$STAGES_PY" \
     ${args[@]+"${args[@]}"} || rc=$?
 # Belt and braces: nothing may be left mounted under the root in the host namespace.
 if [[ -n "$(mounts_under_root)" ]]; then
@@ -252,8 +283,10 @@ say "in-root run: $(elapsed "$t0") s, status $rc"
 if [[ $mode == test && -f "$OUT/job0-latest.h5" && -x "$SRC/.venv/bin/woundsweep" ]]; then
     t0=$(date +%s)
     hrc=0
+    # The stage range the root solved (the host runs the same source tree).
+    STAGES=$("$SRC/.venv/bin/python" -c "$STAGES_PY" 2>/dev/null || echo 1-6)
     "$SRC/.venv/bin/woundsweep" generate "$SRC/sweeps/demo.yaml" --out "$OUT/run-host" >/dev/null &&
-        "$SRC/.venv/bin/woundsweep" solve "$OUT/run-host" --job 0 --stages 1-6 --out "$OUT/job0-host.h5" || hrc=$?
+        "$SRC/.venv/bin/woundsweep" solve "$OUT/run-host" --job 0 --stages "$STAGES" --out "$OUT/job0-host.h5" || hrc=$?
     say "host demo solve: $(elapsed "$t0") s, status $hrc"
     if ((hrc == 0)); then
         "$SRC/.venv/bin/python" "$SRC/scripts/probes/compare_stage_results.py" \

@@ -63,7 +63,14 @@ def unit_cube_arrays() -> tuple[np.ndarray, np.ndarray]:
             for k in range(n):
                 v = [idx[i + a, j + b, k + c] for a in (0, 1) for b in (0, 1) for c in (0, 1)]
                 # v index = 4a + 2b + c; the 6 Kuhn tets share the diagonal v0-v7.
-                for p in ((0, 1, 3, 7), (0, 1, 5, 7), (0, 2, 3, 7), (0, 2, 6, 7), (0, 4, 5, 7), (0, 4, 6, 7)):
+                for p in (
+                    (0, 1, 3, 7),
+                    (0, 1, 5, 7),
+                    (0, 2, 3, 7),
+                    (0, 2, 6, 7),
+                    (0, 4, 5, 7),
+                    (0, 4, 6, 7),
+                ):
                     cells.append([v[q] for q in p])
     return points, np.asarray(cells, dtype=np.int64)
 
@@ -71,20 +78,21 @@ def unit_cube_arrays() -> tuple[np.ndarray, np.ndarray]:
 def main() -> int:
     import logging
 
-    from mpi4py import MPI
-    from petsc4py import PETSc
-
     import dolfinx
     import dolfinx.fem.petsc as fpetsc
     import ufl
     from dolfinx import fem, geometry, io
     from dolfinx import mesh as dmesh
+    from mpi4py import MPI
+    from petsc4py import PETSc
 
     comm = MPI.COMM_WORLD
     logging.getLogger().setLevel(logging.WARNING)  # FFCx/setuptools compile chatter
-    print(f"DOLFINx {dolfinx.__version__}  UFL {getattr(ufl, '__version__', '?')}  "
-          f"PETSc {'.'.join(map(str, PETSc.Sys.getVersion()))}  numpy {np.__version__}  "
-          f"python {sys.version.split()[0]}")
+    print(
+        f"DOLFINx {dolfinx.__version__}  UFL {getattr(ufl, '__version__', '?')}  "
+        f"PETSc {'.'.join(map(str, PETSc.Sys.getVersion()))}  numpy {np.__version__}  "
+        f"python {sys.version.split()[0]}"
+    )
     try:
         import basix
 
@@ -106,37 +114,54 @@ def main() -> int:
     def coord_basix() -> Any:
         import basix.ufl
 
-        return ufl.Mesh(basix.ufl.element("Lagrange", "tetrahedron", 1, shape=(3,))), "ufl.Mesh(basix.ufl.element(...))"
+        return ufl.Mesh(
+            basix.ufl.element("Lagrange", "tetrahedron", 1, shape=(3,))
+        ), "ufl.Mesh(basix.ufl.element(...))"
 
     def coord_ufl() -> Any:
-        return ufl.Mesh(ufl.VectorElement("Lagrange", ufl.tetrahedron, 1)), "ufl.Mesh(ufl.VectorElement)"
+        return ufl.Mesh(
+            ufl.VectorElement("Lagrange", ufl.tetrahedron, 1)
+        ), "ufl.Mesh(ufl.VectorElement)"
 
     def coord_basix_plain() -> Any:
         import basix.ufl
 
-        return basix.ufl.element("Lagrange", "tetrahedron", 1, shape=(3,)), "basix.ufl element (no ufl.Mesh)"
+        return basix.ufl.element(
+            "Lagrange", "tetrahedron", 1, shape=(3,)
+        ), "basix.ufl element (no ufl.Mesh)"
 
     # A fresh coordinate element per create_mesh call: on 0.5 create_mesh stores the new mesh in
     # the ufl.Mesh ("cargo"), so reusing one ufl.Mesh for two meshes makes forms on the first
     # fail with "RuntimeError: Incompatible mesh".
     factories = []
-    for label, fn in (("ufl.Mesh(basix.ufl.element('Lagrange','tetrahedron',1,shape=(3,)))", coord_basix),
-                      ("ufl.Mesh(ufl.VectorElement('Lagrange', ufl.tetrahedron, 1))", coord_ufl),
-                      ("basix.ufl.element(...) passed directly", coord_basix_plain)):
+    for label, fn in (
+        ("ufl.Mesh(basix.ufl.element('Lagrange','tetrahedron',1,shape=(3,)))", coord_basix),
+        ("ufl.Mesh(ufl.VectorElement('Lagrange', ufl.tetrahedron, 1))", coord_ufl),
+        ("basix.ufl.element(...) passed directly", coord_basix_plain),
+    ):
         if attempt("coordinate element", [(label, fn)]) is not None:
             factories.append((label, fn))
 
     msh = None
     for dlabel, fn in factories:
         short = dlabel.split("(")[0] + "(...)"
-        m = attempt("create_mesh", [
-            (f"create_mesh(comm, cells, points, {short})  [0.5-0.9 order]",
-             lambda fn=fn: dmesh.create_mesh(comm, cells, points, fn()[0])),
-            (f"create_mesh(comm, cells, {short}, points)  [0.10+ order]",
-             lambda fn=fn: dmesh.create_mesh(comm, cells, fn()[0], points)),
-            ("create_mesh(comm, cells=, x=, e=/domain=)  [keywords]",
-             lambda fn=fn: _create_kw(dmesh.create_mesh, comm, cells, points, fn()[0])),
-        ])
+        m = attempt(
+            "create_mesh",
+            [
+                (
+                    f"create_mesh(comm, cells, points, {short})  [0.5-0.9 order]",
+                    lambda fn=fn: dmesh.create_mesh(comm, cells, points, fn()[0]),
+                ),
+                (
+                    f"create_mesh(comm, cells, {short}, points)  [0.10+ order]",
+                    lambda fn=fn: dmesh.create_mesh(comm, cells, fn()[0], points),
+                ),
+                (
+                    "create_mesh(comm, cells=, x=, e=/domain=)  [keywords]",
+                    lambda fn=fn: _create_kw(dmesh.create_mesh, comm, cells, points, fn()[0]),
+                ),
+            ],
+        )
         if m is not None and msh is None:
             msh = m
     if msh is None:
@@ -145,271 +170,630 @@ def main() -> int:
     tdim = msh.topology.dim
     msh.topology.create_connectivity(tdim - 1, tdim)
     ncell = msh.topology.index_map(tdim).size_local
-    print(f"mesh: {ncell} cells, {msh.geometry.x.shape[0]} geometry nodes, geometry.x shape {msh.geometry.x.shape}")
+    print(
+        f"mesh: {ncell} cells, {msh.geometry.x.shape[0]} geometry nodes, geometry.x shape {msh.geometry.x.shape}"
+    )
 
     # ---- cell / node ordering relative to the input arrays
-    attempt("original cell index", [
-        ("msh.topology.original_cell_index  (ndarray)",
-         lambda: _oci(msh.topology.original_cell_index, ncell)),
-        ("msh.topology.original_cell_index[0]  (list per cell type)",
-         lambda: _oci(msh.topology.original_cell_index[0], ncell)),
-    ])
-    attempt("input global indices of nodes", [
-        ("msh.geometry.input_global_indices", lambda: _igi(msh, points)),
-    ])
-    attempt("geometry dofmap", [
-        ("msh.geometry.dofmap", lambda: _dofmap_kind(msh.geometry.dofmap)),
-        ("msh.geometry.dofmaps[0]  (0.10+; plain .dofmap warns DeprecationWarning on 0.11)",
-         lambda: _dofmap_kind(msh.geometry.dofmaps[0])),
-        ("msh.geometry.dofmap.links(c)  (AdjacencyList)", lambda: _dofmap_kind(msh.geometry.dofmap.links(0))),
-    ])
+    attempt(
+        "original cell index",
+        [
+            (
+                "msh.topology.original_cell_index  (ndarray)",
+                lambda: _oci(msh.topology.original_cell_index, ncell),
+            ),
+            (
+                "msh.topology.original_cell_index[0]  (list per cell type)",
+                lambda: _oci(msh.topology.original_cell_index[0], ncell),
+            ),
+        ],
+    )
+    attempt(
+        "input global indices of nodes",
+        [
+            ("msh.geometry.input_global_indices", lambda: _igi(msh, points)),
+        ],
+    )
+    attempt(
+        "geometry dofmap",
+        [
+            ("msh.geometry.dofmap", lambda: _dofmap_kind(msh.geometry.dofmap)),
+            (
+                "msh.geometry.dofmaps[0]  (0.10+; plain .dofmap warns DeprecationWarning on 0.11)",
+                lambda: _dofmap_kind(msh.geometry.dofmaps[0]),
+            ),
+            (
+                "msh.geometry.dofmap.links(c)  (AdjacencyList)",
+                lambda: _dofmap_kind(msh.geometry.dofmap.links(0)),
+            ),
+        ],
+    )
 
     # ---- meshtags
-    mt = attempt("meshtags (cells)", [
-        ("dolfinx.mesh.meshtags(msh, tdim, np.arange(n, dtype=np.int32), values_int32)",
-         lambda: (dmesh.meshtags(msh, tdim, np.arange(ncell, dtype=np.int32),
-                                 np.where(msh.geometry.x[_cell_nodes(msh)].mean(axis=1)[:, 2] > 0.5, 1, 2).astype(np.int32)),
-                  "ok")),
-        ("dolfinx.mesh.meshtags(... int64 entities)",
-         lambda: (dmesh.meshtags(msh, tdim, np.arange(ncell, dtype=np.int64), np.ones(ncell, dtype=np.int32)), "ok")),
-    ])
-    attempt("meshtags attributes", [
-        ("mt.indices, mt.values, mt.find(v)", lambda: f"{len(mt.indices)} tagged; find(1) -> {len(mt.find(1))}"),
-    ])
+    mt = attempt(
+        "meshtags (cells)",
+        [
+            (
+                "dolfinx.mesh.meshtags(msh, tdim, np.arange(n, dtype=np.int32), values_int32)",
+                lambda: (
+                    dmesh.meshtags(
+                        msh,
+                        tdim,
+                        np.arange(ncell, dtype=np.int32),
+                        np.where(
+                            msh.geometry.x[_cell_nodes(msh)].mean(axis=1)[:, 2] > 0.5, 1, 2
+                        ).astype(np.int32),
+                    ),
+                    "ok",
+                ),
+            ),
+            (
+                "dolfinx.mesh.meshtags(... int64 entities)",
+                lambda: (
+                    dmesh.meshtags(
+                        msh, tdim, np.arange(ncell, dtype=np.int64), np.ones(ncell, dtype=np.int32)
+                    ),
+                    "ok",
+                ),
+            ),
+        ],
+    )
+    attempt(
+        "meshtags attributes",
+        [
+            (
+                "mt.indices, mt.values, mt.find(v)",
+                lambda: f"{len(mt.indices)} tagged; find(1) -> {len(mt.find(1))}",
+            ),
+        ],
+    )
     facets = dmesh.locate_entities_boundary(msh, tdim - 1, lambda x: np.isclose(x[2], 0.0))
-    attempt("locate_entities_boundary", [
-        ("dolfinx.mesh.locate_entities_boundary(msh, tdim-1, marker)", lambda: f"{len(facets)} facets on z=0 (expect 8)"),
-    ])
-    attempt("exterior_facet_indices", [
-        ("dolfinx.mesh.exterior_facet_indices(msh.topology)",
-         lambda: f"{len(dmesh.exterior_facet_indices(msh.topology))} (expect 48)"),
-    ])
-    attempt("entities_to_geometry", [
-        ("dolfinx.mesh.entities_to_geometry(msh, dim, entities, orient=False)",
-         lambda: str(dmesh.entities_to_geometry(msh, tdim - 1, facets, False).shape)),
-        ("dolfinx.mesh.entities_to_geometry(msh, dim, entities)",
-         lambda: str(dmesh.entities_to_geometry(msh, tdim - 1, facets).shape)),
-        ("dolfinx.cpp.mesh.entities_to_geometry(msh, dim, entities, False)  [0.5: Mesh is the C++ object]",
-         lambda: str(dolfinx.cpp.mesh.entities_to_geometry(msh, tdim - 1, facets, False).shape)),
-        ("dolfinx.cpp.mesh.entities_to_geometry(msh._cpp_object, dim, entities, False)",
-         lambda: str(dolfinx.cpp.mesh.entities_to_geometry(msh._cpp_object, tdim - 1, facets, False).shape)),
-    ])
+    attempt(
+        "locate_entities_boundary",
+        [
+            (
+                "dolfinx.mesh.locate_entities_boundary(msh, tdim-1, marker)",
+                lambda: f"{len(facets)} facets on z=0 (expect 8)",
+            ),
+        ],
+    )
+    attempt(
+        "exterior_facet_indices",
+        [
+            (
+                "dolfinx.mesh.exterior_facet_indices(msh.topology)",
+                lambda: f"{len(dmesh.exterior_facet_indices(msh.topology))} (expect 48)",
+            ),
+        ],
+    )
+    attempt(
+        "entities_to_geometry",
+        [
+            (
+                "dolfinx.mesh.entities_to_geometry(msh, dim, entities, orient=False)",
+                lambda: str(dmesh.entities_to_geometry(msh, tdim - 1, facets, False).shape),
+            ),
+            (
+                "dolfinx.mesh.entities_to_geometry(msh, dim, entities)",
+                lambda: str(dmesh.entities_to_geometry(msh, tdim - 1, facets).shape),
+            ),
+            (
+                "dolfinx.cpp.mesh.entities_to_geometry(msh, dim, entities, False)  [0.5: Mesh is the C++ object]",
+                lambda: str(
+                    dolfinx.cpp.mesh.entities_to_geometry(msh, tdim - 1, facets, False).shape
+                ),
+            ),
+            (
+                "dolfinx.cpp.mesh.entities_to_geometry(msh._cpp_object, dim, entities, False)",
+                lambda: str(
+                    dolfinx.cpp.mesh.entities_to_geometry(
+                        msh._cpp_object, tdim - 1, facets, False
+                    ).shape
+                ),
+            ),
+        ],
+    )
 
     # ---- function spaces
-    V = attempt("vector P1 space", [
-        ("fem.functionspace(msh, ('Lagrange', 1, (3,)))", lambda: fem.functionspace(msh, ("Lagrange", 1, (3,)))),
-        ("fem.VectorFunctionSpace(msh, ('Lagrange', 1))", lambda: fem.VectorFunctionSpace(msh, ("Lagrange", 1))),
-    ])
-    Q = attempt("scalar DG0 space", [
-        ("fem.functionspace(msh, ('DG', 0))", lambda: fem.functionspace(msh, ("DG", 0))),
-        ("fem.FunctionSpace(msh, ('DG', 0))", lambda: fem.FunctionSpace(msh, ("DG", 0))),
-    ])
-    attempt("tensor DG0 space", [
-        ("fem.functionspace(msh, ('DG', 0, (3, 3)))", lambda: fem.functionspace(msh, ("DG", 0, (3, 3)))),
-        ("fem.TensorFunctionSpace(msh, ('DG', 0))", lambda: fem.TensorFunctionSpace(msh, ("DG", 0))),
-    ])
-    attempt("sub-space collapse", [
-        ("V.sub(0).collapse() -> (V0, map)", lambda: f"returns {type(V.sub(0).collapse()).__name__} of len {len(V.sub(0).collapse())}"),
-    ])
-    attempt("dofmap", [
-        ("V.dofmap.index_map.size_local, V.dofmap.index_map_bs",
-         lambda: f"{V.dofmap.index_map.size_local} x bs {V.dofmap.index_map_bs}"),
-        ("V.dofmap.list", lambda: _dofmap_kind(V.dofmap.list)),
-        ("V.dofmap.cell_dofs(c)", lambda: str(V.dofmap.cell_dofs(0))),
-    ])
+    V = attempt(
+        "vector P1 space",
+        [
+            (
+                "fem.functionspace(msh, ('Lagrange', 1, (3,)))",
+                lambda: fem.functionspace(msh, ("Lagrange", 1, (3,))),
+            ),
+            (
+                "fem.VectorFunctionSpace(msh, ('Lagrange', 1))",
+                lambda: fem.VectorFunctionSpace(msh, ("Lagrange", 1)),
+            ),
+        ],
+    )
+    Q = attempt(
+        "scalar DG0 space",
+        [
+            ("fem.functionspace(msh, ('DG', 0))", lambda: fem.functionspace(msh, ("DG", 0))),
+            ("fem.FunctionSpace(msh, ('DG', 0))", lambda: fem.FunctionSpace(msh, ("DG", 0))),
+        ],
+    )
+    attempt(
+        "tensor DG0 space",
+        [
+            (
+                "fem.functionspace(msh, ('DG', 0, (3, 3)))",
+                lambda: fem.functionspace(msh, ("DG", 0, (3, 3))),
+            ),
+            (
+                "fem.TensorFunctionSpace(msh, ('DG', 0))",
+                lambda: fem.TensorFunctionSpace(msh, ("DG", 0)),
+            ),
+        ],
+    )
+    attempt(
+        "sub-space collapse",
+        [
+            (
+                "V.sub(0).collapse() -> (V0, map)",
+                lambda: (
+                    f"returns {type(V.sub(0).collapse()).__name__} of len {len(V.sub(0).collapse())}"
+                ),
+            ),
+        ],
+    )
+    attempt(
+        "dofmap",
+        [
+            (
+                "V.dofmap.index_map.size_local, V.dofmap.index_map_bs",
+                lambda: f"{V.dofmap.index_map.size_local} x bs {V.dofmap.index_map_bs}",
+            ),
+            ("V.dofmap.list", lambda: _dofmap_kind(V.dofmap.list)),
+            ("V.dofmap.cell_dofs(c)", lambda: str(V.dofmap.cell_dofs(0))),
+        ],
+    )
 
     u = fem.Function(V, name="u")
     v = ufl.TestFunction(V)
     du = ufl.TrialFunction(V)
 
     # ---- Constant
-    mu = attempt("Constant", [
-        ("fem.Constant(msh, PETSc.ScalarType(1.0))", lambda: fem.Constant(msh, PETSc.ScalarType(1.0))),
-        ("fem.Constant(msh, dolfinx.default_scalar_type(1.0))", lambda: fem.Constant(msh, dolfinx.default_scalar_type(1.0))),
-    ])
+    mu = attempt(
+        "Constant",
+        [
+            (
+                "fem.Constant(msh, PETSc.ScalarType(1.0))",
+                lambda: fem.Constant(msh, PETSc.ScalarType(1.0)),
+            ),
+            (
+                "fem.Constant(msh, dolfinx.default_scalar_type(1.0))",
+                lambda: fem.Constant(msh, dolfinx.default_scalar_type(1.0)),
+            ),
+        ],
+    )
     attempt("Constant update", [("c.value = 2.0 (in place)", lambda: _set_const(mu))])
 
     # ---- forms, quadrature metadata, subdomain measure
     dx = ufl.Measure("dx", domain=msh, subdomain_data=mt, metadata={"quadrature_degree": 1})
     eps = ufl.sym(ufl.grad(du))
-    a_ufl = 2 * mu * ufl.inner(eps, ufl.sym(ufl.grad(v))) * dx(1) + 2 * mu * ufl.inner(eps, ufl.sym(ufl.grad(v))) * dx(2)
+    a_ufl = 2 * mu * ufl.inner(eps, ufl.sym(ufl.grad(v))) * dx(1) + 2 * mu * ufl.inner(
+        eps, ufl.sym(ufl.grad(v))
+    ) * dx(2)
     L_ufl = ufl.inner(fem.Constant(msh, PETSc.ScalarType((0.0, 0.0, -1.0))), v) * dx
     opts = {"cache_dir": "/tmp/probe-ffcx-cache"}
-    a = attempt("fem.form options", [
-        ("fem.form(a, form_compiler_options={...}, jit_options={...})",
-         lambda: fem.form(a_ufl, form_compiler_options={"scalar_type": PETSc.ScalarType} if _has_scalar_type_opt() else {}, jit_options=opts)),
-        ("fem.form(a, form_compiler_params={...}, jit_params={...})",
-         lambda: fem.form(a_ufl, form_compiler_params={}, jit_params=opts)),
-    ])
+    a = attempt(
+        "fem.form options",
+        [
+            (
+                "fem.form(a, form_compiler_options={...}, jit_options={...})",
+                lambda: fem.form(
+                    a_ufl,
+                    form_compiler_options={"scalar_type": PETSc.ScalarType}
+                    if _has_scalar_type_opt()
+                    else {},
+                    jit_options=opts,
+                ),
+            ),
+            (
+                "fem.form(a, form_compiler_params={...}, jit_params={...})",
+                lambda: fem.form(a_ufl, form_compiler_params={}, jit_params=opts),
+            ),
+        ],
+    )
     L = fem.form(L_ufl)
     print(f"fem.form signature: {sig(fem.form)}")
 
     # ---- boundary conditions
     fixed = dmesh.locate_entities_boundary(msh, tdim - 1, lambda x: np.isclose(x[2], 0.0))
-    dofs = attempt("locate_dofs_topological", [
-        ("fem.locate_dofs_topological(V, tdim-1, facets)",
-         lambda: fem.locate_dofs_topological(V, tdim - 1, fixed)),
-    ])
-    attempt("locate_dofs_topological on a sub-space", [
-        ("fem.locate_dofs_topological((V.sub(0), V0), tdim-1, facets)",
-         lambda: f"{len(fem.locate_dofs_topological((V.sub(0), V.sub(0).collapse()[0]), tdim - 1, fixed)[0])} dofs"),
-        ("fem.locate_dofs_topological(V.sub(0), tdim-1, facets)",
-         lambda: f"{len(fem.locate_dofs_topological(V.sub(0), tdim - 1, fixed))} dofs"),
-    ])
-    attempt("locate_dofs_geometrical", [
-        ("fem.locate_dofs_geometrical(V, marker)",
-         lambda: f"{len(fem.locate_dofs_geometrical(V, lambda x: np.isclose(x[2], 0.0)))} (blocked) dofs"),
-        ("fem.locate_dofs_geometrical((V.sub(0), V0), marker)",
-         lambda: f"{len(fem.locate_dofs_geometrical((V.sub(0), V.sub(0).collapse()[0]), lambda x: np.isclose(x[2], 0.0))[0])} dofs"),
-    ])
+    dofs = attempt(
+        "locate_dofs_topological",
+        [
+            (
+                "fem.locate_dofs_topological(V, tdim-1, facets)",
+                lambda: fem.locate_dofs_topological(V, tdim - 1, fixed),
+            ),
+        ],
+    )
+    attempt(
+        "locate_dofs_topological on a sub-space",
+        [
+            (
+                "fem.locate_dofs_topological((V.sub(0), V0), tdim-1, facets)",
+                lambda: (
+                    f"{len(fem.locate_dofs_topological((V.sub(0), V.sub(0).collapse()[0]), tdim - 1, fixed)[0])} dofs"
+                ),
+            ),
+            (
+                "fem.locate_dofs_topological(V.sub(0), tdim-1, facets)",
+                lambda: f"{len(fem.locate_dofs_topological(V.sub(0), tdim - 1, fixed))} dofs",
+            ),
+        ],
+    )
+    attempt(
+        "locate_dofs_geometrical",
+        [
+            (
+                "fem.locate_dofs_geometrical(V, marker)",
+                lambda: (
+                    f"{len(fem.locate_dofs_geometrical(V, lambda x: np.isclose(x[2], 0.0)))} (blocked) dofs"
+                ),
+            ),
+            (
+                "fem.locate_dofs_geometrical((V.sub(0), V0), marker)",
+                lambda: (
+                    f"{len(fem.locate_dofs_geometrical((V.sub(0), V.sub(0).collapse()[0]), lambda x: np.isclose(x[2], 0.0))[0])} dofs"
+                ),
+            ),
+        ],
+    )
     zero = np.zeros(3, dtype=PETSc.ScalarType)
-    bc = attempt("dirichletbc", [
-        ("fem.dirichletbc(np.zeros(3), dofs, V)", lambda: fem.dirichletbc(zero, dofs, V)),
-        ("fem.dirichletbc(Constant, dofs, V)", lambda: fem.dirichletbc(fem.Constant(msh, zero), dofs, V)),
-        ("fem.dirichletbc(Function, dofs)", lambda: fem.dirichletbc(fem.Function(V), dofs)),
-    ])
+    bc = attempt(
+        "dirichletbc",
+        [
+            ("fem.dirichletbc(np.zeros(3), dofs, V)", lambda: fem.dirichletbc(zero, dofs, V)),
+            (
+                "fem.dirichletbc(Constant, dofs, V)",
+                lambda: fem.dirichletbc(fem.Constant(msh, zero), dofs, V),
+            ),
+            ("fem.dirichletbc(Function, dofs)", lambda: fem.dirichletbc(fem.Function(V), dofs)),
+        ],
+    )
     bcs = [bc]
 
     # ---- assembly
     print(f"apply_lifting signature: {sig(fpetsc.apply_lifting)}")
     print(f"set_bc signature: {sig(fpetsc.set_bc)}")
     print(f"create_vector signature: {sig(fpetsc.create_vector)}")
-    A = attempt("create_matrix + assemble_matrix", [
-        ("A = fem.petsc.create_matrix(a); fem.petsc.assemble_matrix(A, a, bcs=bcs); A.assemble()",
-         lambda: _asm_mat(fpetsc, a, bcs, create_first=True)),
-        ("A = fem.petsc.assemble_matrix(a, bcs=bcs); A.assemble()",
-         lambda: _asm_mat(fpetsc, a, bcs, create_first=False)),
-    ])
-    b = attempt("create_vector", [
-        ("fem.petsc.create_vector(L)", lambda: fpetsc.create_vector(L)),
-        ("fem.petsc.create_vector(V)", lambda: fpetsc.create_vector(V)),
-        ("fem.petsc.create_vector([L])", lambda: fpetsc.create_vector([L])),
-    ])
-    attempt("assemble_vector into existing", [
-        ("with b.localForm() as bl: bl.set(0); fem.petsc.assemble_vector(b, L)",
-         lambda: _asm_vec(fpetsc, b, L)),
-    ])
-    uvec = attempt("PETSc Vec of a Function", [
-        ("u.x.petsc_vec", lambda: u.x.petsc_vec),
-        ("u.vector", lambda: u.vector),
-    ])
-    attempt("apply_lifting", [
-        ("fem.petsc.apply_lifting(b, [a], [bcs], x0=[uvec], alpha=-1.0)",
-         lambda: fpetsc.apply_lifting(b, [a], [bcs], x0=[uvec], alpha=-1.0) or "ok"),
-        ("fem.petsc.apply_lifting(b, [a], bcs=[bcs], x0=[uvec], scale=-1.0)",
-         lambda: fpetsc.apply_lifting(b, [a], bcs=[bcs], x0=[uvec], scale=-1.0) or "ok"),
-        ("fem.petsc.apply_lifting(b, [a], [bcs], [uvec], -1.0)  [positional]",
-         lambda: fpetsc.apply_lifting(b, [a], [bcs], [uvec], -1.0) or "ok"),
-    ])
-    attempt("ghostUpdate", [
-        ("b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)",
-         lambda: b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE) or "ok"),
-    ])
-    attempt("set_bc", [
-        ("fem.petsc.set_bc(b, bcs, x0=uvec, alpha=-1.0)", lambda: fpetsc.set_bc(b, bcs, x0=uvec, alpha=-1.0) or "ok"),
-        ("fem.petsc.set_bc(b, bcs, x0=uvec, scale=-1.0)", lambda: fpetsc.set_bc(b, bcs, x0=uvec, scale=-1.0) or "ok"),
-        ("fem.petsc.set_bc(b, bcs, uvec, -1.0)  [positional]", lambda: fpetsc.set_bc(b, bcs, uvec, -1.0) or "ok"),
-        ("bc.set(b.array_w, x0=uvec.array_r, alpha=-1.0)  [0.10+ DirichletBC.set]",
-         lambda: bc.set(b.array_w, x0=uvec.array_r, alpha=-1.0) or "ok"),
-    ])
+    A = attempt(
+        "create_matrix + assemble_matrix",
+        [
+            (
+                "A = fem.petsc.create_matrix(a); fem.petsc.assemble_matrix(A, a, bcs=bcs); A.assemble()",
+                lambda: _asm_mat(fpetsc, a, bcs, create_first=True),
+            ),
+            (
+                "A = fem.petsc.assemble_matrix(a, bcs=bcs); A.assemble()",
+                lambda: _asm_mat(fpetsc, a, bcs, create_first=False),
+            ),
+        ],
+    )
+    b = attempt(
+        "create_vector",
+        [
+            ("fem.petsc.create_vector(L)", lambda: fpetsc.create_vector(L)),
+            ("fem.petsc.create_vector(V)", lambda: fpetsc.create_vector(V)),
+            ("fem.petsc.create_vector([L])", lambda: fpetsc.create_vector([L])),
+        ],
+    )
+    attempt(
+        "assemble_vector into existing",
+        [
+            (
+                "with b.localForm() as bl: bl.set(0); fem.petsc.assemble_vector(b, L)",
+                lambda: _asm_vec(fpetsc, b, L),
+            ),
+        ],
+    )
+    uvec = attempt(
+        "PETSc Vec of a Function",
+        [
+            ("u.x.petsc_vec", lambda: u.x.petsc_vec),
+            ("u.vector", lambda: u.vector),
+        ],
+    )
+    attempt(
+        "apply_lifting",
+        [
+            (
+                "fem.petsc.apply_lifting(b, [a], [bcs], x0=[uvec], alpha=-1.0)",
+                lambda: fpetsc.apply_lifting(b, [a], [bcs], x0=[uvec], alpha=-1.0) or "ok",
+            ),
+            (
+                "fem.petsc.apply_lifting(b, [a], bcs=[bcs], x0=[uvec], scale=-1.0)",
+                lambda: fpetsc.apply_lifting(b, [a], bcs=[bcs], x0=[uvec], scale=-1.0) or "ok",
+            ),
+            (
+                "fem.petsc.apply_lifting(b, [a], [bcs], [uvec], -1.0)  [positional]",
+                lambda: fpetsc.apply_lifting(b, [a], [bcs], [uvec], -1.0) or "ok",
+            ),
+        ],
+    )
+    attempt(
+        "ghostUpdate",
+        [
+            (
+                "b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)",
+                lambda: (
+                    b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE) or "ok"
+                ),
+            ),
+        ],
+    )
+    attempt(
+        "set_bc",
+        [
+            (
+                "fem.petsc.set_bc(b, bcs, x0=uvec, alpha=-1.0)",
+                lambda: fpetsc.set_bc(b, bcs, x0=uvec, alpha=-1.0) or "ok",
+            ),
+            (
+                "fem.petsc.set_bc(b, bcs, x0=uvec, scale=-1.0)",
+                lambda: fpetsc.set_bc(b, bcs, x0=uvec, scale=-1.0) or "ok",
+            ),
+            (
+                "fem.petsc.set_bc(b, bcs, uvec, -1.0)  [positional]",
+                lambda: fpetsc.set_bc(b, bcs, uvec, -1.0) or "ok",
+            ),
+            (
+                "bc.set(b.array_w, x0=uvec.array_r, alpha=-1.0)  [0.10+ DirichletBC.set]",
+                lambda: bc.set(b.array_w, x0=uvec.array_r, alpha=-1.0) or "ok",
+            ),
+        ],
+    )
 
     # ---- linear solve with MUMPS
-    x = attempt("KSP preonly + LU/MUMPS", [
-        ("ksp.setType('preonly'); pc.setType('lu'); pc.setFactorSolverType('mumps')",
-         lambda: _solve(A, b, "lu", "mumps", comm)),
-        ("pc.setType('cholesky') + mumps (LDL^T)", lambda: _solve(A, b, "cholesky", "mumps", comm)),
-        ("pc.setFactorSolverType('petsc') (native LU)", lambda: _solve(A, b, "lu", "petsc", comm)),
-    ])
-    attempt("lifetime of Function.x.petsc_vec", [
-        ("vec(fem.Function(V)).duplicate()  [temporary Function; run in a subprocess]",
-         lambda: _temporary_vec_subprocess()),
-    ])
-    attempt("copy solution into Function", [
-        ("x.copy(uvec); u.x.scatter_forward()", lambda: (x.copy(uvec), u.x.scatter_forward(), "ok")[-1]),
-        ("u.x.array[:] = x.array_r; u.x.scatter_forward()",
-         lambda: (u.x.array.__setitem__(slice(None), x.array_r), u.x.scatter_forward(), "ok")[-1]),
-    ])
-    attempt("solution sanity", [("max |u_z| (clamped top, body force down)", lambda: f"{np.abs(u.x.array[2::3]).max():.6e}")])
+    x = attempt(
+        "KSP preonly + LU/MUMPS",
+        [
+            (
+                "ksp.setType('preonly'); pc.setType('lu'); pc.setFactorSolverType('mumps')",
+                lambda: _solve(A, b, "lu", "mumps", comm),
+            ),
+            (
+                "pc.setType('cholesky') + mumps (LDL^T)",
+                lambda: _solve(A, b, "cholesky", "mumps", comm),
+            ),
+            (
+                "pc.setFactorSolverType('petsc') (native LU)",
+                lambda: _solve(A, b, "lu", "petsc", comm),
+            ),
+        ],
+    )
+    attempt(
+        "lifetime of Function.x.petsc_vec",
+        [
+            (
+                "vec(fem.Function(V)).duplicate()  [temporary Function; run in a subprocess]",
+                lambda: _temporary_vec_subprocess(),
+            ),
+        ],
+    )
+    attempt(
+        "copy solution into Function",
+        [
+            (
+                "x.copy(uvec); u.x.scatter_forward()",
+                lambda: (x.copy(uvec), u.x.scatter_forward(), "ok")[-1],
+            ),
+            (
+                "u.x.array[:] = x.array_r; u.x.scatter_forward()",
+                lambda: (
+                    u.x.array.__setitem__(slice(None), x.array_r),
+                    u.x.scatter_forward(),
+                    "ok",
+                )[-1],
+            ),
+        ],
+    )
+    attempt(
+        "solution sanity",
+        [
+            (
+                "max |u_z| (clamped top, body force down)",
+                lambda: f"{np.abs(u.x.array[2::3]).max():.6e}",
+            )
+        ],
+    )
 
     # ---- interpolation
     w = fem.Function(V)
-    attempt("Function.interpolate(callable)", [
-        ("w.interpolate(lambda x: np.vstack((x[0], 2*x[1], 0*x[2])))",
-         lambda: (w.interpolate(lambda x: np.vstack((x[0], 2 * x[1], 0 * x[2]))), f"max {w.x.array.max():.3f} (expect 2)")[1]),
-    ])
-    ip = attempt("interpolation points", [
-        ("Q.element.interpolation_points  (property)", lambda: _ip(Q.element.interpolation_points, False)),
-        ("Q.element.interpolation_points()  (method)", lambda: _ip(Q.element.interpolation_points, True)),
-    ])
+    attempt(
+        "Function.interpolate(callable)",
+        [
+            (
+                "w.interpolate(lambda x: np.vstack((x[0], 2*x[1], 0*x[2])))",
+                lambda: (
+                    w.interpolate(lambda x: np.vstack((x[0], 2 * x[1], 0 * x[2]))),
+                    f"max {w.x.array.max():.3f} (expect 2)",
+                )[1],
+            ),
+        ],
+    )
+    ip = attempt(
+        "interpolation points",
+        [
+            (
+                "Q.element.interpolation_points  (property)",
+                lambda: _ip(Q.element.interpolation_points, False),
+            ),
+            (
+                "Q.element.interpolation_points()  (method)",
+                lambda: _ip(Q.element.interpolation_points, True),
+            ),
+        ],
+    )
     vm = fem.Function(Q)
     expr_ufl = ufl.sqrt(ufl.inner(ufl.grad(w), ufl.grad(w)))
-    expr = attempt("fem.Expression", [
-        ("fem.Expression(ufl_expr, Q.element.interpolation_points[()])", lambda: fem.Expression(expr_ufl, ip)),
-        ("fem.Expression(ufl_expr, X, comm=msh.comm)", lambda: fem.Expression(expr_ufl, ip, comm=msh.comm)),
-    ])
-    attempt("Function.interpolate(Expression)", [
-        ("vm.interpolate(expr)", lambda: (vm.interpolate(expr), f"value {vm.x.array[0]:.6f} (expect sqrt(5)=2.236068)")[1]),
-    ])
+    expr = attempt(
+        "fem.Expression",
+        [
+            (
+                "fem.Expression(ufl_expr, Q.element.interpolation_points[()])",
+                lambda: fem.Expression(expr_ufl, ip),
+            ),
+            (
+                "fem.Expression(ufl_expr, X, comm=msh.comm)",
+                lambda: fem.Expression(expr_ufl, ip, comm=msh.comm),
+            ),
+        ],
+    )
+    attempt(
+        "Function.interpolate(Expression)",
+        [
+            (
+                "vm.interpolate(expr)",
+                lambda: (
+                    vm.interpolate(expr),
+                    f"value {vm.x.array[0]:.6f} (expect sqrt(5)=2.236068)",
+                )[1],
+            ),
+        ],
+    )
 
     # ---- point location
     pts = np.array([[0.3, 0.4, 0.5], [0.9, 0.1, 0.2], [2.0, 2.0, 2.0]], dtype=np.float64)
-    tree = attempt("bounding box tree", [
-        ("geometry.bb_tree(msh, tdim)", lambda: geometry.bb_tree(msh, tdim)),
-        ("geometry.BoundingBoxTree(msh, tdim)", lambda: geometry.BoundingBoxTree(msh, tdim)),
-    ])
-    cand = attempt("compute_collisions (points)", [
-        ("geometry.compute_collisions_points(tree, pts)", lambda: geometry.compute_collisions_points(tree, pts)),
-        ("geometry.compute_collisions(tree, pts)", lambda: geometry.compute_collisions(tree, pts)),
-    ])
-    attempt("compute_colliding_cells", [
-        ("geometry.compute_colliding_cells(msh, cand, pts)",
-         lambda: _colliding(geometry.compute_colliding_cells(msh, cand, pts))),
-    ])
-    attempt("Function.eval", [
-        ("w.eval(pts[:2], cells[:2])", lambda: _eval(w, msh, tree, pts[:2], geometry)),
-    ])
-    attempt("compute_midpoints", [
-        ("dolfinx.mesh.compute_midpoints(msh, tdim, np.arange(n, dtype=np.int32))",
-         lambda: str(dmesh.compute_midpoints(msh, tdim, np.arange(ncell, dtype=np.int32)).shape)),
-    ])
+    tree = attempt(
+        "bounding box tree",
+        [
+            ("geometry.bb_tree(msh, tdim)", lambda: geometry.bb_tree(msh, tdim)),
+            ("geometry.BoundingBoxTree(msh, tdim)", lambda: geometry.BoundingBoxTree(msh, tdim)),
+        ],
+    )
+    cand = attempt(
+        "compute_collisions (points)",
+        [
+            (
+                "geometry.compute_collisions_points(tree, pts)",
+                lambda: geometry.compute_collisions_points(tree, pts),
+            ),
+            (
+                "geometry.compute_collisions(tree, pts)",
+                lambda: geometry.compute_collisions(tree, pts),
+            ),
+        ],
+    )
+    attempt(
+        "compute_colliding_cells",
+        [
+            (
+                "geometry.compute_colliding_cells(msh, cand, pts)",
+                lambda: _colliding(geometry.compute_colliding_cells(msh, cand, pts)),
+            ),
+        ],
+    )
+    attempt(
+        "Function.eval",
+        [
+            ("w.eval(pts[:2], cells[:2])", lambda: _eval(w, msh, tree, pts[:2], geometry)),
+        ],
+    )
+    attempt(
+        "compute_midpoints",
+        [
+            (
+                "dolfinx.mesh.compute_midpoints(msh, tdim, np.arange(n, dtype=np.int32))",
+                lambda: str(
+                    dmesh.compute_midpoints(msh, tdim, np.arange(ncell, dtype=np.int32)).shape
+                ),
+            ),
+        ],
+    )
 
     # ---- scalar assembly (volumes, reaction forces)
     one = fem.Constant(msh, PETSc.ScalarType(1.0))
-    attempt("assemble_scalar + subdomain dx", [
-        ("fem.assemble_scalar(fem.form(c*dx(1)))",
-         lambda: f"{fem.assemble_scalar(fem.form(one * dx(1))):.6f} + {fem.assemble_scalar(fem.form(one * dx(2))):.6f} (expect total 1)"),
-    ])
+    attempt(
+        "assemble_scalar + subdomain dx",
+        [
+            (
+                "fem.assemble_scalar(fem.form(c*dx(1)))",
+                lambda: (
+                    f"{fem.assemble_scalar(fem.form(one * dx(1))):.6f} + {fem.assemble_scalar(fem.form(one * dx(2))):.6f} (expect total 1)"
+                ),
+            ),
+        ],
+    )
 
     # ---- XDMF
-    attempt("XDMFFile write", [
-        ("io.XDMFFile(comm, path, 'w'); write_mesh; write_function(u, t)",
-         lambda: _xdmf(io, comm, msh, u)),
-    ])
-    attempt("VTXWriter", [
-        ("io.VTXWriter(comm, path, [u], engine='BP4')", lambda: (io.VTXWriter(comm, "/tmp/probe.bp", [u], engine="BP4").close(), "ok")[1]),
-        ("io.VTXWriter(comm, path, [u])", lambda: (io.VTXWriter(comm, "/tmp/probe2.bp", [u]).close(), "ok")[1]),
-    ])
+    attempt(
+        "XDMFFile write",
+        [
+            (
+                "io.XDMFFile(comm, path, 'w'); write_mesh; write_function(u, t)",
+                lambda: _xdmf(io, comm, msh, u),
+            ),
+        ],
+    )
+    attempt(
+        "VTXWriter",
+        [
+            (
+                "io.VTXWriter(comm, path, [u], engine='BP4')",
+                lambda: (io.VTXWriter(comm, "/tmp/probe.bp", [u], engine="BP4").close(), "ok")[1],
+            ),
+            (
+                "io.VTXWriter(comm, path, [u])",
+                lambda: (io.VTXWriter(comm, "/tmp/probe2.bp", [u]).close(), "ok")[1],
+            ),
+        ],
+    )
 
     # ---- gmsh bridge (optional: woundsweep builds meshes as numpy arrays)
-    attempt("gmsh -> DOLFINx module", [
-        ("dolfinx.io.gmsh.model_to_mesh (-> MeshData)", lambda: (dolfinx.io.gmsh.model_to_mesh, "exists")),
-        ("dolfinx.io.gmshio.model_to_mesh (-> 3-tuple)", lambda: (__import__("dolfinx.io.gmshio", fromlist=["x"]).model_to_mesh, "exists")),
-    ])
+    attempt(
+        "gmsh -> DOLFINx module",
+        [
+            (
+                "dolfinx.io.gmsh.model_to_mesh (-> MeshData)",
+                lambda: (dolfinx.io.gmsh.model_to_mesh, "exists"),
+            ),
+            (
+                "dolfinx.io.gmshio.model_to_mesh (-> 3-tuple)",
+                lambda: (__import__("dolfinx.io.gmshio", fromlist=["x"]).model_to_mesh, "exists"),
+            ),
+        ],
+    )
 
     # ---- Newton helpers
-    attempt("Newton classes", [
-        ("dolfinx.nls.petsc.NewtonSolver", lambda: (__import__("dolfinx.nls.petsc", fromlist=["x"]).NewtonSolver, "exists")),
-        ("dolfinx.fem.petsc.NonlinearProblem", lambda: (fpetsc.NonlinearProblem, sig(fpetsc.NonlinearProblem.__init__)[:120])),
-        ("dolfinx.fem.petsc.NewtonSolverNonlinearProblem", lambda: (fpetsc.NewtonSolverNonlinearProblem, "exists")),
-    ])
-    attempt("scalar type", [
-        ("dolfinx.default_scalar_type", lambda: (dolfinx.default_scalar_type, str(dolfinx.default_scalar_type))),
-        ("PETSc.ScalarType", lambda: (PETSc.ScalarType, str(PETSc.ScalarType))),
-    ])
+    attempt(
+        "Newton classes",
+        [
+            (
+                "dolfinx.nls.petsc.NewtonSolver",
+                lambda: (__import__("dolfinx.nls.petsc", fromlist=["x"]).NewtonSolver, "exists"),
+            ),
+            (
+                "dolfinx.fem.petsc.NonlinearProblem",
+                lambda: (fpetsc.NonlinearProblem, sig(fpetsc.NonlinearProblem.__init__)[:120]),
+            ),
+            (
+                "dolfinx.fem.petsc.NewtonSolverNonlinearProblem",
+                lambda: (fpetsc.NewtonSolverNonlinearProblem, "exists"),
+            ),
+        ],
+    )
+    attempt(
+        "scalar type",
+        [
+            (
+                "dolfinx.default_scalar_type",
+                lambda: (dolfinx.default_scalar_type, str(dolfinx.default_scalar_type)),
+            ),
+            ("PETSc.ScalarType", lambda: (PETSc.ScalarType, str(PETSc.ScalarType))),
+        ],
+    )
     return report()
 
 
-def _create_kw(create: Callable[..., Any], comm: Any, cells: np.ndarray, points: np.ndarray, domain: Any) -> Any:
+def _create_kw(
+    create: Callable[..., Any], comm: Any, cells: np.ndarray, points: np.ndarray, domain: Any
+) -> Any:
     params = inspect.signature(create).parameters
     key = "e" if "e" in params else "domain"
     return create(comm, cells=cells, x=points, **{key: domain})
@@ -422,13 +806,19 @@ def _cell_nodes(msh: Any) -> np.ndarray:
 
 def _oci(arr: Any, n: int) -> tuple[Any, str]:
     arr = np.asarray(arr)
-    return arr, f"len {len(arr)} dtype {arr.dtype}; identity? {bool(np.array_equal(arr[:n], np.arange(n)))}"
+    return (
+        arr,
+        f"len {len(arr)} dtype {arr.dtype}; identity? {bool(np.array_equal(arr[:n], np.arange(n)))}",
+    )
 
 
 def _igi(msh: Any, points: np.ndarray) -> tuple[Any, str]:
     igi = np.asarray(msh.geometry.input_global_indices)
     same = np.allclose(msh.geometry.x[:, :3], points[igi])
-    return igi, f"len {len(igi)}; geometry.x == points[igi]: {same}; identity? {bool(np.array_equal(igi, np.arange(len(igi))))}"
+    return (
+        igi,
+        f"len {len(igi)}; geometry.x == points[igi]: {same}; identity? {bool(np.array_equal(igi, np.arange(len(igi))))}",
+    )
 
 
 def _dofmap_kind(dm: Any) -> str:
@@ -526,9 +916,13 @@ def _temporary_vec_subprocess() -> str:
     import subprocess
 
     env = dict(__import__("os").environ, PETSC_OPTIONS="-no_signal_handler")
-    p = subprocess.run([sys.executable, "-c", _TEMP_VEC], capture_output=True, text=True, env=env, timeout=300)
+    p = subprocess.run(
+        [sys.executable, "-c", _TEMP_VEC], capture_output=True, text=True, env=env, timeout=300
+    )
     if p.returncode != 0:
-        raise RuntimeError(f"subprocess died with status {p.returncode} (the Vec died with its Function)")
+        raise RuntimeError(
+            f"subprocess died with status {p.returncode} (the Vec died with its Function)"
+        )
     return f"ok, size {p.stdout.strip()}"
 
 

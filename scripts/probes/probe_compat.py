@@ -55,18 +55,36 @@ def block(n: int = 4) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, n
         for j in range(n):
             for k in range(n):
                 v = [idx[i + a, j + b, k + c] for a in (0, 1) for b in (0, 1) for c in (0, 1)]
-                for p in ((0, 1, 3, 7), (0, 1, 5, 7), (0, 2, 3, 7), (0, 2, 6, 7), (0, 4, 5, 7), (0, 4, 6, 7)):
+                for p in (
+                    (0, 1, 3, 7),
+                    (0, 1, 5, 7),
+                    (0, 2, 3, 7),
+                    (0, 2, 6, 7),
+                    (0, 4, 5, 7),
+                    (0, 4, 6, 7),
+                ):
                     cells.append([v[q] for q in p])
     cells = np.asarray(cells, dtype=np.int64)
     ctags = np.where(points[cells].mean(axis=1)[:, 2] > -0.5, 1, 2).astype(np.int32)
     # Boundary triangles: faces of cells that occur once.
-    faces = np.sort(np.concatenate([cells[:, [1, 2, 3]], cells[:, [0, 2, 3]], cells[:, [0, 1, 3]], cells[:, [0, 1, 2]]]), axis=1)
+    faces = np.sort(
+        np.concatenate(
+            [cells[:, [1, 2, 3]], cells[:, [0, 2, 3]], cells[:, [0, 1, 3]], cells[:, [0, 1, 2]]]
+        ),
+        axis=1,
+    )
     uniq, counts = np.unique(faces, axis=0, return_counts=True)
     tri = uniq[counts == 1]
     c = points[tri].mean(axis=1)
     tags = np.select(
-        [np.isclose(c[:, 0], 0), np.isclose(c[:, 0], 1), np.isclose(c[:, 1], 0), np.isclose(c[:, 1], 1),
-         np.isclose(c[:, 2], -1), np.isclose(c[:, 2], 0)],
+        [
+            np.isclose(c[:, 0], 0),
+            np.isclose(c[:, 0], 1),
+            np.isclose(c[:, 1], 0),
+            np.isclose(c[:, 1], 1),
+            np.isclose(c[:, 2], -1),
+            np.isclose(c[:, 2], 0),
+        ],
         [11, 12, 13, 14, 15, 16],
     ).astype(np.int32)
     return points, cells, ctags, tri, tags
@@ -80,9 +98,13 @@ def main() -> int:
     from woundsweep import compat
 
     logging.getLogger().setLevel(logging.WARNING)
-    print(f"DOLFINx {dolfinx.__version__}; compat exports: {', '.join(getattr(compat, '__all__', []))}")
+    print(
+        f"DOLFINx {dolfinx.__version__}; compat exports: {', '.join(getattr(compat, '__all__', []))}"
+    )
     points, cells, ctags, tri, ftags = block()
-    res = check("mesh_from_arrays", lambda: compat.mesh_from_arrays(points, cells, ctags, tri, ftags))
+    res = check(
+        "mesh_from_arrays", lambda: compat.mesh_from_arrays(points, cells, ctags, tri, ftags)
+    )
     if res is None:
         return len(FAILED) or 1
     msh, cell_mt, facet_mt = res
@@ -112,7 +134,10 @@ def main() -> int:
         mid = dolfinx.mesh.compute_midpoints(msh, tdim, np.arange(n, dtype=np.int32))
         err = np.abs(mid - points[cells[ci]].mean(axis=1)).max()
         assert err < 1e-12, err
-        return ci, f"max centroid mismatch {err:.1e}; identity {bool(np.array_equal(ci, np.arange(n)))}"
+        return (
+            ci,
+            f"max centroid mismatch {err:.1e}; identity {bool(np.array_equal(ci, np.arange(n)))}",
+        )
 
     check("cell_input_index (centroids match input cells)", cell_index)
 
@@ -144,6 +169,11 @@ def main() -> int:
         assert err < 1e-12, err
         return f"max mismatch {err:.1e}"
 
+    if Q is not None:
+        check(
+            "cell_dofs of DG0 = one dof per cell",
+            lambda: str(np.unique(compat.cell_dofs(Q)).size == n),
+        )
     if V is not None:
         check("node_input_index (dof coordinates match input points)", node_index)
         check("cell_dofs shape", lambda: str(compat.cell_dofs(V).shape))
@@ -155,8 +185,12 @@ def main() -> int:
         u = dolfinx.fem.Function(V)
         v = ufl.TestFunction(V)
         du = ufl.TrialFunction(V)
-        dx = ufl.Measure("dx", domain=msh, subdomain_data=cell_mt, metadata={"quadrature_degree": 1})
-        a = compat.compile_form(ufl.inner(ufl.grad(du), ufl.grad(v)) * dx(1), jit=compat.jit_options())
+        dx = ufl.Measure(
+            "dx", domain=msh, subdomain_data=cell_mt, metadata={"quadrature_degree": 1}
+        )
+        a = compat.compile_form(
+            ufl.inner(ufl.grad(du), ufl.grad(v)) * dx(1), jit=compat.jit_options()
+        )
         L = compat.compile_form(ufl.inner(ufl.as_vector((0.0, 0.0, 1.0)), v) * dx(2))
         A = compat.create_matrix(a)
         compat.assemble_matrix(A, a)

@@ -35,7 +35,14 @@ def kuhn_cube(n: int) -> tuple[np.ndarray, np.ndarray]:
         for j in range(n):
             for k in range(n):
                 v = [idx[i + a, j + b, k + c] for a in (0, 1) for b in (0, 1) for c in (0, 1)]
-                for p in ((0, 1, 3, 7), (0, 1, 5, 7), (0, 2, 3, 7), (0, 2, 6, 7), (0, 4, 5, 7), (0, 4, 6, 7)):
+                for p in (
+                    (0, 1, 3, 7),
+                    (0, 1, 5, 7),
+                    (0, 2, 3, 7),
+                    (0, 2, 6, 7),
+                    (0, 4, 5, 7),
+                    (0, 4, 6, 7),
+                ):
                     cells.append([v[q] for q in p])
     return points, np.asarray(cells, dtype=np.int64)
 
@@ -49,14 +56,13 @@ def fingerprint(a: np.ndarray, digits: int = 8) -> str:
 def main() -> int:
     import logging
 
-    from mpi4py import MPI
-    from petsc4py import PETSc
-
     import dolfinx
     import dolfinx.fem.petsc as fpetsc
     import ufl
     from dolfinx import fem, geometry
     from dolfinx import mesh as dmesh
+    from mpi4py import MPI
+    from petsc4py import PETSc
 
     logging.getLogger().setLevel(logging.WARNING)
     comm = MPI.COMM_SELF
@@ -83,7 +89,11 @@ def main() -> int:
 
     def form(f: Any) -> Any:
         p = inspect.signature(fem.form).parameters
-        kw = ("jit_options", "form_compiler_options") if "jit_options" in p else ("jit_params", "form_compiler_params")
+        kw = (
+            ("jit_options", "form_compiler_options")
+            if "jit_options" in p
+            else ("jit_params", "form_compiler_params")
+        )
         return fem.form(f, **{kw[0]: {"cache_dir": "/tmp/probe-numerics-cache"}, kw[1]: {}})
 
     def vec(u: Any) -> Any:
@@ -108,8 +118,8 @@ def main() -> int:
     v, du = ufl.TestFunction(V), ufl.TrialFunction(V)
     mu = fem.Constant(msh, PETSc.ScalarType(10.0))
     lam = fem.Constant(msh, PETSc.ScalarType(40.0))
-    I = ufl.Identity(3)
-    F = ufl.variable(I + ufl.grad(u))
+    Id = ufl.Identity(3)
+    F = ufl.variable(Id + ufl.grad(u))
     J = ufl.det(F)
     psi = mu / 2 * (ufl.tr(F.T * F) - 3) - mu * ufl.ln(J) + lam / 2 * ufl.ln(J) ** 2
     dx = ufl.Measure("dx", domain=msh, metadata={"quadrature_degree": 1})
@@ -122,7 +132,10 @@ def main() -> int:
     V0, _ = V.sub(0).collapse()
     dr = fem.locate_dofs_topological((V.sub(0), V0), tdim - 1, right)
     g = fem.Function(V0)
-    bcs = [fem.dirichletbc(np.zeros(3, dtype=PETSc.ScalarType), dl, V), fem.dirichletbc(g, dr, V.sub(0))]
+    bcs = [
+        fem.dirichletbc(np.zeros(3, dtype=PETSc.ScalarType), dl, V),
+        fem.dirichletbc(g, dr, V.sub(0)),
+    ]
 
     A = fpetsc.create_matrix(Jf)
     uvec = vec(u)
@@ -136,14 +149,18 @@ def main() -> int:
     its = []
     for step in range(1, 5):
         g.x.array[:] = 0.1 * step / 4
-        for it in range(30):
+        n_it = 0
+        for _ in range(30):
+            n_it += 1
             A.zeroEntries()
             fpetsc.assemble_matrix(A, Jf, bcs=bcs)
             A.assemble()
             with b.localForm() as bl:
                 bl.set(0.0)
             fpetsc.assemble_vector(b, R)
-            fpetsc.apply_lifting(b, [Jf], [bcs], x0=[uvec], **{scale_kw(fpetsc.apply_lifting): -1.0})
+            fpetsc.apply_lifting(
+                b, [Jf], [bcs], x0=[uvec], **{scale_kw(fpetsc.apply_lifting): -1.0}
+            )
             b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
             fpetsc.set_bc(b, bcs, uvec, -1.0)
             ksp.solve(b, dxv)
@@ -151,7 +168,7 @@ def main() -> int:
             u.x.scatter_forward()
             if dxv.norm() < 1e-11:
                 break
-        its.append(it + 1)
+        its.append(n_it)
 
     # Reaction: x-component of the residual without BCs, summed over the pulled face.
     with b.localForm() as bl:
@@ -163,7 +180,7 @@ def main() -> int:
 
     P = ufl.diff(psi, F)
     sigma = P * F.T / J
-    s_dev = sigma - ufl.tr(sigma) / 3 * I
+    s_dev = sigma - ufl.tr(sigma) / 3 * Id
     vm_expr = fem.Expression(ufl.sqrt(1.5 * ufl.inner(s_dev, s_dev)), interp_points(Q))
     vm = fem.Function(Q)
     vm.interpolate(vm_expr)
@@ -177,8 +194,14 @@ def main() -> int:
     mid = dmesh.compute_midpoints(msh, tdim, np.array([imax], dtype=np.int32))[0]
 
     pt = np.array([[0.55, 0.45, 0.5]])
-    tree = geometry.bb_tree(msh, tdim) if hasattr(geometry, "bb_tree") else geometry.BoundingBoxTree(msh, tdim)
-    coll = (getattr(geometry, "compute_collisions_points", None) or geometry.compute_collisions)(tree, pt)
+    tree = (
+        geometry.bb_tree(msh, tdim)
+        if hasattr(geometry, "bb_tree")
+        else geometry.BoundingBoxTree(msh, tdim)
+    )
+    coll = (getattr(geometry, "compute_collisions_points", None) or geometry.compute_collisions)(
+        tree, pt
+    )
     cc = geometry.compute_colliding_cells(msh, coll, pt)
     upt = u.eval(pt, np.array([cc.links(0)[0]], dtype=np.int32))
 
@@ -189,7 +212,9 @@ def main() -> int:
     print(f"max_von_mises_kPa      {vmv.max():.10e}  at cell midpoint {np.round(mid, 6).tolist()}")
     print(f"p99_von_mises_kPa      {p99:.10e}  (volume-weighted)")
     print(f"u(0.55,0.45,0.5)_mm    {np.array2string(upt, precision=10)}")
-    print(f"original_cell_index    first 8 {orig[:8].tolist()}  identity {bool(np.array_equal(orig, np.arange(ncell)))}")
+    print(
+        f"original_cell_index    first 8 {orig[:8].tolist()}  identity {bool(np.array_equal(orig, np.arange(ncell)))}"
+    )
     print(f"vm per cell, DOLFINx order  sha {fingerprint(vmv)}")
     print(f"vm per cell, INPUT order    sha {fingerprint(vm_input)}")
     print(f"u per dof, DOLFINx order    sha {fingerprint(u.x.array)}")

@@ -53,17 +53,25 @@ def line(label: str, fn) -> None:  # type: ignore[no-untyped-def]
 
 
 def main() -> int:
-    print(f"PETSc {'.'.join(map(str, PETSc.Sys.getVersion()))}  petsc4py {__import__('petsc4py').__version__}")
+    print(
+        f"PETSc {'.'.join(map(str, PETSc.Sys.getVersion()))}  petsc4py {__import__('petsc4py').__version__}"
+    )
     n = 50
     A = laplacian(n)
-    line("Mat.setOption(KEEP_NONZERO_PATTERN, True)", lambda: A.setOption(PETSc.Mat.Option.KEEP_NONZERO_PATTERN, True) or "ok")
+    line(
+        "Mat.setOption(KEEP_NONZERO_PATTERN, True)",
+        lambda: A.setOption(PETSc.Mat.Option.KEEP_NONZERO_PATTERN, True) or "ok",
+    )
     x, b = A.createVecs()
     line("A.createVecs() -> (right, left)", lambda: f"{x.getSize()}, {b.getSize()}")
     b.set(1.0)
     ksp = make_ksp(A)
     line("pc.getFactorSolverType()", lambda: ksp.getPC().getFactorSolverType())
     # PETSc 3.18 stores ICNTL set before the first factorisation and only reports it after it.
-    line("F.getMumpsIcntl(14) before the first factorisation", lambda: ksp.getPC().getFactorMatrix().getMumpsIcntl(14))
+    line(
+        "F.getMumpsIcntl(14) before the first factorisation",
+        lambda: ksp.getPC().getFactorMatrix().getMumpsIcntl(14),
+    )
 
     def solve_rows() -> str:
         rows = np.array([0, n - 1], dtype=np.int32)
@@ -78,7 +86,10 @@ def main() -> int:
         return f"reason {ksp.getConvergedReason()}, max error vs exact {err:.2e}, nnz kept {A.getInfo()['nz_used']:.0f}"
 
     line("A.zeroRows(rows, diag=1.0); ksp.setUp(); ksp.solve", solve_rows)
-    line("F.getMumpsIcntl(14) after the factorisation", lambda: ksp.getPC().getFactorMatrix().getMumpsIcntl(14))
+    line(
+        "F.getMumpsIcntl(14) after the factorisation",
+        lambda: ksp.getPC().getFactorMatrix().getMumpsIcntl(14),
+    )
 
     def refactor() -> str:
         # New values in the same pattern (Newton's next Jacobian) must be refactorised.
@@ -116,8 +127,14 @@ def main() -> int:
         return f"no exception; reason {k.getConvergedReason()}, INFOG(1) {info}, finite {bool(np.isfinite(arr).all())}"
 
     line("singular matrix with MUMPS LU", singular)
-    line("PETSc.KSP.ConvergedReason.DIVERGED_PCSETUP_FAILED", lambda: PETSc.KSP.ConvergedReason.DIVERGED_PCSETUP_FAILED)
-    line("Vec.getArray()[:] = ... writes through", lambda: (b.getArray().__setitem__(slice(None), 3.0), b.sum())[1])
+    line(
+        "PETSc.KSP.ConvergedReason.DIVERGED_PCSETUP_FAILED",
+        lambda: PETSc.KSP.ConvergedReason.DIVERGED_PCSETUP_FAILED,
+    )
+    line(
+        "Vec.getArray()[:] = ... writes through",
+        lambda: (b.getArray().__setitem__(slice(None), 3.0), b.sum())[1],
+    )
     return 0
 
 

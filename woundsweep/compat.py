@@ -32,6 +32,7 @@ __all__ = [
     "cell_input_index",
     "compile_form",
     "create_matrix",
+    "create_vector",
     "dg0_space",
     "facet_meshtags",
     "jit_options",
@@ -77,7 +78,9 @@ def num_cells(mesh: Any) -> int:
 
 
 def _geometry_dofmap(mesh: Any) -> np.ndarray:
-    return _adjacency_array(mesh.geometry.dofmap, 4)[: num_cells(mesh)]
+    g = mesh.geometry
+    dm = g.dofmaps[0] if hasattr(g, "dofmaps") else g.dofmap  # 0.10+: one per cell type
+    return _adjacency_array(dm, 4)[: num_cells(mesh)]
 
 
 def _connectivity(mesh: Any, d0: int, d1: int, width: int) -> np.ndarray:
@@ -198,7 +201,10 @@ def node_input_index(V: Any) -> np.ndarray:
 
 
 def petsc_vec(u: Any) -> PETSc.Vec:
-    """The PETSc vector that wraps a Function's dof array."""
+    """The PETSc vector that wraps a Function's dof array.
+
+    On 0.9+ the vector dies with its Function: keep ``u`` referenced while the vector is used.
+    """
     x = getattr(u, "x", None)
     vec = getattr(x, "petsc_vec", None) if x is not None else None
     return vec if vec is not None else u.vector
@@ -224,13 +230,23 @@ def compile_form(
     kwargs[fc_kw] = dict(compiler or {})
     # FFCx updates integral metadata dicts in place; measures share one dict, so compile a copy
     # whose integrals own their metadata, or later forms would hash differently.
-    isolated = ufl.Form([itg.reconstruct(metadata=dict(itg.metadata())) for itg in form.integrals()])
+    isolated = ufl.Form(
+        [itg.reconstruct(metadata=dict(itg.metadata())) for itg in form.integrals()]
+    )
     return dolfinx.fem.form(isolated, **kwargs)
 
 
 def create_matrix(a: Any) -> PETSc.Mat:
     """PETSc AIJ matrix with the sparsity of the bilinear form ``a``."""
     return dolfinx.fem.petsc.create_matrix(a)
+
+
+def create_vector(L: Any) -> PETSc.Vec:
+    """PETSc vector for the linear form ``L`` (0.11 takes the test space, not the form)."""
+    try:
+        return dolfinx.fem.petsc.create_vector(L)
+    except TypeError:
+        return dolfinx.fem.petsc.create_vector(L.function_spaces[0])
 
 
 def assemble_matrix(A: PETSc.Mat, a: Any) -> PETSc.Mat:

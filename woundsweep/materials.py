@@ -86,7 +86,6 @@ class Material(ABC):
         """Strain energy per unit reference volume (kPa) at deformation gradient ``F``."""
 
 
-
 def first_piola(material: Material, F: Any) -> Any:
     """First Piola-Kirchhoff stress P = dW/dF (kPa): UFL ``diff`` or numpy complex step."""
     if isinstance(F, np.ndarray):
@@ -98,7 +97,7 @@ def first_piola(material: Material, F: Any) -> Any:
                 Fc[i, j] += 1j * _COMPLEX_STEP
                 P[i, j] = np.imag(material.strain_energy(Fc)) / _COMPLEX_STEP
         return P
-    Fv = F if isinstance(F, ufl.variable.Variable) else ufl.variable(F)
+    Fv = F if isinstance(F, ufl.classes.Variable) else ufl.variable(F)
     return ufl.diff(material.strain_energy(Fv), Fv)
 
 

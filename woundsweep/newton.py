@@ -23,8 +23,9 @@ no acceptable relaxation), ``inverted`` (every relaxation inverts an element),
 ``linear-solver-failed`` (factorisation error or non-finite solution).
 
 `continuation` ramps a stage's change with a load factor s in [0, 1]: the increment halves
-after a failure (up to ``max_load_cuts`` times in a row) and doubles after an easy success;
-a secant predictor extrapolates the last increment's displacement.
+after a failure (up to ``max_load_cuts`` times in a row) and doubles after an easy success.
+Measured on a wounded test patch (3 jobs x stages 1-3): one first increment needed 84 Newton
+steps in all, four first increments 154, a secant predictor made two-step ramps worse.
 """
 
 from __future__ import annotations
@@ -57,7 +58,7 @@ __all__ = [
 ]
 
 _log = logging.getLogger(__name__)
-PREDICT = True
+LINEAR_RTOL = 1e-6  # accepted relative residual of a direct solve
 
 CONVERGED = "converged"
 MAX_ITERATIONS = "max-iterations"
@@ -76,7 +77,7 @@ class NewtonSettings:
     rtol: float = 1e-8  # residual, relative to the force scale
     atol: float = 1e-10  # residual floor, mN
     stol: float = 1e-8  # increment and Dirichlet mismatch, relative to the length scale
-    load_steps: int = 4  # first load increment = 1 / load_steps of the stage's change
+    load_steps: int = 1  # first load increment = 1 / load_steps of the stage's change
     max_load_cuts: int = 6  # consecutive halvings of the load increment before giving up
     max_strain_step: float = 0.5  # largest |grad du| (Frobenius, per cell) of one update
     gamma_min: float = 1.0 / 64.0  # smallest relaxation factor tried
@@ -176,15 +177,26 @@ class NewtonSolver:
             F.setMumpsIcntl(14, 100)  # workspace headroom: fewer -9 failures on 3D meshes
             self._factored = True
         self.ksp.setUp()
+        self.ksp.getPC().setUp()  # numeric factorisation now, so it is timed on its own
         return t1 - t0, time.perf_counter() - t1
 
     def _linear_solve(self, rhs: np.ndarray) -> np.ndarray | None:
+        """Solve with the current factors; None on failure or an inaccurate solution.
+
+        A (near-)singular tangent can factorise without a MUMPS error and give a finite but
+        meaningless answer, so the true residual ||A du - b|| is checked (one product).
+        """
         self.b.getArray()[:] = rhs
         self.ksp.solve(self.b, self.dx)
         if self.ksp.getConvergedReason() < 0:
             return None
         du = self.dx.getArray(readonly=True).copy()
-        return du if np.all(np.isfinite(du)) else None
+        if not np.all(np.isfinite(du)):
+            return None
+        check = self.b.duplicate()
+        self.A.mult(self.dx, check)
+        err = np.linalg.norm(check.getArray(readonly=True) - rhs)
+        return du if err <= LINEAR_RTOL * max(np.linalg.norm(rhs), 1e-300) else None
 
     # -- the solve ----------------------------------------------------------------------
 
@@ -215,9 +227,7 @@ class NewtonSolver:
         chord_done = False
 
         def result(status: str) -> NewtonResult:
-            return NewtonResult(
-                status, it, res_norm, scale, min_det, t_asm, t_fac, t_sol, t_res
-            )
+            return NewtonResult(status, it, res_norm, scale, min_det, t_asm, t_fac, t_sol, t_res)
 
         while True:
             if not np.all(np.isfinite(r)):
@@ -230,7 +240,11 @@ class NewtonSolver:
             res_ok = res_norm <= st.atol + st.rtol * scale
             _log.debug(
                 "newton it=%d |R|=%.3e scale=%.3e bc=%.2e inc=%.2e gamma=%.3g",
-                it, res_norm, scale, float(np.max(np.abs(bc_err), initial=0.0)), last_inc,
+                it,
+                res_norm,
+                scale,
+                float(np.max(np.abs(bc_err), initial=0.0)),
+                last_inc,
                 self.gamma,
             )
             if res_ok and bc_ok and last_inc <= st.stol * ell:
@@ -337,17 +351,10 @@ def continuation(
     cuts_in_row = cuts = its = incs = 0
     times = np.zeros(4)
     last: NewtonResult | None = None
-    prev_du: np.ndarray | None = None
-    prev_ds = 0.0
     newton.gamma = 1.0
     while s < 1.0 - 1e-12:
         s_next = min(1.0, s + ds)
         u_saved = u.copy()
-        if PREDICT and prev_du is not None and prev_ds > 0:
-            # Secant predictor: extrapolate the last increment (dropped if it inverts a cell).
-            u += (s_next - s) / prev_ds * prev_du
-            if newton.problem.min_det(u) <= 0:
-                u[:] = u_saved
         state = load(s_next)
         res = newton.solve(rows, state.values, state.offset, force_scale)
         last = res
@@ -355,14 +362,12 @@ def continuation(
         times += (res.assembly_time_s, res.factor_time_s, res.solve_time_s, res.residual_time_s)
         if res.status == CONVERGED:
             incs += 1
-            prev_du, prev_ds = u - u_saved, s_next - s
             s = s_next
             cuts_in_row = 0
             if res.iterations <= 4:
                 ds *= 2.0
             continue
         u[:] = u_saved
-        prev_du = None
         cuts += 1
         cuts_in_row += 1
         newton.gamma = 1.0

@@ -332,6 +332,8 @@ def _classify(att: _Attempt, status: int, opts: RunOptions, log: Path) -> _Class
     code = os.WEXITSTATUS(status)
     tail = _log_tail(log, att.log_offset)
     if code in (EXIT_CONVERGED, EXIT_NOT_CONVERGED):
+        if not att.out.exists():
+            return _Classified("crashed", f"exit {code} but no output file", None)
         try:
             out = read_solver_output(att.out, job.job_id, opts.stages)
         except StoreError as err:
@@ -519,6 +521,21 @@ class _Runner:
         return False
 
 
+def _store(store: Store, row: dict[str, Any], outcome: JobOutcome, opts: RunOptions) -> None:
+    """Write the job; output that validated but cannot be stored makes it ``crashed``."""
+    try:
+        store.write_job(row, outcome, opts.stages, opts.fields, str(opts.shard))
+        return
+    except OSError as err:
+        if err.errno in (errno.ENOSPC, errno.EDQUOT, errno.EROFS):
+            raise StoreError(f"{store.run_dir}: cannot write the store ({err.strerror})") from None
+        detail = f"output could not be stored: {err}"
+    except (KeyError, ValueError, TypeError) as err:
+        detail = f"output could not be stored: {type(err).__name__}: {err}"
+    bad = outcome._replace(failure_class="crashed", failure_detail=detail[:500], output=None)
+    store.write_job(row, bad, opts.stages, opts.fields, str(opts.shard))
+
+
 def _order(jobs: pd.DataFrame, warmup: bool) -> list[dict[str, Any]]:
     """Manifest order, except that the cheapest job goes first to warm the JIT cache."""
     rows = jobs.to_dict("records")
@@ -592,11 +609,7 @@ def run_shard(run_dir: str | Path, opts: RunOptions) -> RunSummary:
                     queue.append(att.job)
                     continue
                 try:
-                    store.write_job(att.job.row, outcome, opts.stages, opts.fields, str(opts.shard))
-                except OSError as err:
-                    if err.errno == errno.ENOSPC:
-                        raise StoreError(f"{run_dir}: no space left on device") from None
-                    raise
+                    _store(store, att.job.row, outcome, opts)
                 finally:
                     att.out.unlink(missing_ok=True)
                 runner.by_class[outcome.failure_class] = (

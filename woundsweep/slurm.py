@@ -54,6 +54,7 @@ __all__ = [
     "mem_bytes",
     "parse_extra",
     "parse_mem",
+    "parse_stages",
     "parse_time",
     "read_submissions",
     "record_submission",
@@ -96,6 +97,7 @@ class SlurmOptions:
     account: str | None = None
     extra: tuple[str, ...] = ()
     analyze: bool = False
+    stages: str | None = None  # None: the runner's default (all stages)
     cache_dir: Path | None = None  # None: RUN_DIR/slurm/cache
     warmup: Shard | None = None  # None: no warm-up job
 
@@ -153,6 +155,14 @@ def parse_mem(text: str) -> str:
     if not m or int(m.group(1)) == 0:
         raise SlurmError(f"--mem {text!r}: expected a positive size such as 4G or 3500M")
     return m.group(1) + m.group(2)
+
+
+def parse_stages(text: str) -> str:
+    """``A-B`` or ``A`` with 1 <= A <= B <= 6, normalised to ``A-B``."""
+    m = re.fullmatch(r"\s*([1-6])\s*(?:-\s*([1-6])\s*)?", text)
+    if not m or int(m.group(2) or m.group(1)) < int(m.group(1)):
+        raise SlurmError(f"--stages {text!r}: expected A-B with 1 <= A <= B <= 6, e.g. 1-6")
+    return f"{m.group(1)}-{m.group(2) or m.group(1)}"
 
 
 def mem_bytes(mem: str) -> int:
@@ -243,12 +253,13 @@ def _script(header: str, directives: list[str], body: list[str], opts: SlurmOpti
     return "\n".join(lines) + "\n"
 
 
-def _memory_cap(opts: SlurmOptions, workers: int) -> str:
+def _run_options(opts: SlurmOptions, workers: int) -> str:
+    out = f" --stages {opts.stages}" if opts.stages else ""
     # The runner's default cap is a share of the node's RAM, not of the job's --mem: SLURM
     # would kill the whole task first. 90% of --mem split between the workers, in GB (1e9).
-    if not opts.mem:
-        return ""
-    return f" --max-memory {0.9 * mem_bytes(opts.mem) / workers / 1e9:.2f}"
+    if opts.mem:
+        out += f" --max-memory {0.9 * mem_bytes(opts.mem) / workers / 1e9:.2f}"
+    return out
 
 
 def render(opts: SlurmOptions) -> SlurmScripts:
@@ -264,7 +275,7 @@ def render(opts: SlurmOptions) -> SlurmScripts:
         + _directives(opts, JOB_NAME, "sweep-%A_%a.log", opts.cpus_per_task),
         [
             f'exec {run} --shard "${{SLURM_ARRAY_TASK_ID}}/{n}" '
-            f'--workers "${{SLURM_CPUS_PER_TASK:-1}}"{_memory_cap(opts, opts.cpus_per_task)}'
+            f'--workers "${{SLURM_CPUS_PER_TASK:-1}}"{_run_options(opts, opts.cpus_per_task)}'
         ],
         opts,
     )
@@ -275,7 +286,7 @@ def render(opts: SlurmOptions) -> SlurmScripts:
             f"woundsweep warm-up: runs the one job of shard {w} (the cheapest) alone, so the\n"
             "FFCx JIT cache is filled before the array fans out. Its job is stored as usual.",
             _directives(opts, f"{JOB_NAME}-warmup", "warmup-%j.log", 1),
-            [f"exec {run} --shard {w.index}/{w.count} --workers 1{_memory_cap(opts, 1)}"],
+            [f"exec {run} --shard {w.index}/{w.count} --workers 1{_run_options(opts, 1)}"],
             opts,
         )
     body = ['"$PYTHON" -m woundsweep status "$RUN_DIR"']

@@ -50,7 +50,15 @@ import ufl
 from petsc4py import PETSc
 
 from . import compat
-from .materials import Fung, HomogeneousState, Material, MooneyRivlin, homogeneous_state
+from .materials import (
+    FLYNN_SKIN_TYPES,
+    Fung,
+    HomogeneousState,
+    Material,
+    MooneyRivlin,
+    homogeneous_state,
+    von_mises,
+)
 from .newton import (
     ContinuationResult,
     LoadState,
@@ -109,8 +117,6 @@ class JobMaterials:
     @classmethod
     def table2(cls, skin_type: str, orientation_deg: float) -> JobMaterials:
         """The paper's Table 2 values for ``skin_type`` (normal / stiff / soft)."""
-        from .materials import FLYNN_SKIN_TYPES
-
         return cls(
             Fung.table2(skin_type, orientation_deg),
             MooneyRivlin.subcutis(),
@@ -243,6 +249,7 @@ class WoundModel:
         self.results: dict[int, StageOutcome] = {}
         self.displacements: dict[int, np.ndarray] = {}
         self.tau_kPa = 0.0
+        self.closure_force_mN: tuple[float, float] = (0.0, 0.0)
 
     # -- geometry ---------------------------------------------------------------------------
 
@@ -369,8 +376,6 @@ class WoundModel:
         )
         a = ufl.derivative(R, u, du)
         q = ufl.TestFunction(compat.dg0_space(mesh))
-        from .materials import von_mises
-
         vm = von_mises(P_d, F) * q * dx(DERMIS) + von_mises(P_s, F) * q * dx(SUBCUTIS)
         jit_opts = compat.jit_options() if jit is None else jit
         t0 = time.perf_counter()
@@ -379,7 +384,7 @@ class WoundModel:
         self.vm_form = compat.compile_form(vm, jit_opts)
         self.jit_time_s = time.perf_counter() - t0
         self.Q = compat.dg0_space(mesh)
-        self._vm_vec = dolfinx.fem.petsc.create_vector(self.vm_form)
+        self._vm_vec = compat.create_vector(self.vm_form)
         self._dg0_cell = compat.cell_dofs(self.Q)[:, 0]
 
     # -- NonlinearProblem protocol (newton.py) -----------------------------------------------
@@ -421,6 +426,7 @@ class WoundModel:
         self.T_subcutis.value = np.zeros((3, 3))
         self.tau.value = 0.0
         self.tau_kPa = 0.0
+        self.closure_force_mN = (0.0, 0.0)
         self.u.x.array[:] = 0.0
         self.results.clear()
         self.displacements.clear()
@@ -458,7 +464,9 @@ class WoundModel:
             return 0.0
         x = self.points + self.displacement_input()
         p = x[tri]
-        return float(0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1).sum())
+        return float(
+            0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1).sum()
+        )
 
     def closure_gap(self) -> float:
         """Widest x-opening between the flanks in the closure zone (mm, deformed; NaN if no zone).
@@ -582,7 +590,7 @@ class WoundModel:
         return res, diag
 
     def _stage3(self) -> tuple[ContinuationResult, dict[str, float]]:
-        f_left, f_right = getattr(self, "closure_force_mN", (0.0, 0.0))
+        f_left, f_right = self.closure_force_mN
         area = self.deformed_zone_area("left") + self.deformed_zone_area("right")
         # Left flank is pulled toward +x (f_left > 0), right toward -x (f_right < 0).
         self.tau_kPa = (f_left - f_right) / area if area > 0 else 0.0

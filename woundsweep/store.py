@@ -87,6 +87,8 @@ STAGE_STATUSES = (
     "not-run",
 )
 FIELDS_CHOICES = ("all", "final", "none")
+STAGE_DATASETS = frozenset({"displacement_mm", "von_mises_kPa"})
+MESH_DATASETS = frozenset({"points", "cells", "cell_tags"})
 
 # StageResult fields of docs/design.md (besides `stage` and `status`) and their Arrow types.
 STAGE_FIELDS: dict[str, pa.DataType] = {
@@ -128,6 +130,7 @@ _JOB_FIELDS: dict[str, pa.DataType] = {
     "woundsweep_version": pa.string(),
     "dolfinx_version": pa.string(),
     "python_version": pa.string(),
+    "jit_time_s": pa.float64(),  # the solver's form-compile (or cache load) time, if it says
 }
 META_KEY = b"woundsweep"
 FORMAT_VERSION = 1
@@ -210,7 +213,7 @@ def read_solver_output(path: str | Path, job_id: str, stages: tuple[int, int]) -
     try:
         with h5py.File(path, "r") as f:
             attrs = {k: _attr(v) for k, v in f.attrs.items()}
-            groups = set(f.keys())
+            groups = {g: set(f[g].keys()) for g in f.keys() if isinstance(f[g], h5py.Group)}
     except (OSError, KeyError, ValueError) as err:
         raise StoreError(f"{path}: unreadable solver output ({err})") from None
     if attrs.get("job_id") != job_id:
@@ -223,12 +226,26 @@ def read_solver_output(path: str | Path, job_id: str, stages: tuple[int, int]) -
     for k, r in by_stage.items():
         if r.get("status") not in STAGE_STATUSES:
             raise StoreError(f"{path}: stage {k} has unknown status {r.get('status')!r}")
-        if r["status"] != "not-run" and f"stage_{k}" not in groups:
-            raise StoreError(f"{path}: stage {k} ran but has no stage_{k} group")
+        if r["status"] == "converged" and not STAGE_DATASETS <= groups.get(f"stage_{k}", set()):
+            raise StoreError(
+                f"{path}: converged stage {k} lacks stage_{k}/{sorted(STAGE_DATASETS)}"
+            )
+    for g, names in groups.items():
+        if (g == "mesh" and not MESH_DATASETS <= names) or (
+            g.startswith("stage_") and not STAGE_DATASETS <= names
+        ):
+            raise StoreError(f"{path}: group {g} is incomplete ({sorted(names)})")
     attrs["_groups"] = sorted(groups)
     return SolverOutput(
         path, attrs, {k: v for k, v in by_stage.items() if stages[0] <= k <= stages[1]}
     )
+
+
+def _float_or_none(value: Any) -> float | None:
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        return None
 
 
 def _utc(ts: float) -> _dt.datetime:
@@ -459,6 +476,7 @@ class Store:
             "woundsweep_version": str(attrs.get("woundsweep_version", __version__)),
             "dolfinx_version": attrs.get("dolfinx_version"),
             "python_version": sys.version.split()[0],
+            "jit_time_s": _float_or_none(attrs.get("jit_time_s")),
         }
         rows = []
         for k in range(stages[0], stages[1] + 1):

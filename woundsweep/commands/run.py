@@ -28,6 +28,20 @@ def _default_workers() -> int:
     return len(os.sched_getaffinity(0))
 
 
+def _memory_bytes() -> int:
+    """Physical memory, or the cgroup's limit when lower (batch systems set one)."""
+    ram = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    for path in ("/sys/fs/cgroup/memory.max", "/sys/fs/cgroup/memory/memory.limit_in_bytes"):
+        try:
+            with open(path) as fh:
+                text = fh.read().strip()
+        except OSError:
+            continue
+        if text.isdigit():
+            ram = min(ram, int(text))
+    return ram
+
+
 def _summary_line(s: RunSummary, run_dir: Path) -> str:
     classes = ", ".join(f"{s.by_class[c]} {c}" for c in FAILURE_CLASSES if s.by_class.get(c))
     return (
@@ -119,8 +133,7 @@ def cmd(
         raise StoreError(f"--shard: {err}") from None
     k = workers or _default_workers()
     if max_memory_gb is None:
-        ram = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
-        cap = int(0.9 * ram / k)
+        cap = int(0.9 * _memory_bytes() / k)
     else:
         cap = int(max_memory_gb * 1e9)
     opts = RunOptions(

@@ -17,6 +17,7 @@ from ..slurm import (
     check_path,
     parse_extra,
     parse_mem,
+    parse_stages,
     parse_time,
     record_submission,
     submit,
@@ -53,6 +54,9 @@ def _word(value: str | None, option: str) -> str | None:
     "--cache-dir", type=click.Path(file_okay=False, path_type=Path), default=None,
     help="Shared XDG_CACHE_HOME for the JIT cache [RUN_DIR/slurm/cache].",
 )  # fmt: skip
+@click.option(
+    "--stages", default=None, help="Stages A-B each job runs [the runner's default: 1-6]."
+)
 @click.option("--analyze", is_flag=True, help="The follow-up job also runs `woundsweep analyze`.")
 @click.option("--submit", "do_submit", is_flag=True, help="Submit with sbatch and record the ids.")
 def cmd(
@@ -65,6 +69,7 @@ def cmd(
     account: str | None,
     extra: tuple[str, ...],
     cache_dir: Path | None,
+    stages: str | None,
     analyze: bool,
     do_submit: bool,
 ) -> None:
@@ -83,6 +88,7 @@ def cmd(
     time_ = parse_time(time_) if time_ is not None else None
     mem = parse_mem(mem) if mem is not None else None
     lines = tuple(parse_extra(e) for e in extra)
+    stages = parse_stages(stages) if stages is not None else None
     rd = check_path(Path(os.path.abspath(run_dir)), "RUN_DIR")
     cache = check_path(Path(os.path.abspath(cache_dir)), "--cache-dir") if cache_dir else None
     run = load_run(rd)
@@ -101,6 +107,7 @@ def cmd(
         account=_word(account, "--account"),
         extra=lines,
         analyze=analyze,
+        stages=stages,
         cache_dir=cache,
         warmup=warmup_shard(run.manifest),
     )

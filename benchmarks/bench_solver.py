@@ -1,0 +1,152 @@
+"""Solver benchmark: stages 1-3 on paper geometries (smallest, median, largest mesh).
+
+Usage::
+
+    python benchmarks/bench_solver.py            # warm JIT cache + one cold-cache compile
+    python benchmarks/bench_solver.py --no-cold  # skip the cold-cache JIT measurement
+
+Prints, per geometry: cells, dofs, and per stage the Newton steps, load increments, wall
+time, and the mean Jacobian assembly and MUMPS factorisation time per Newton step. A fourth
+mesh beyond the paper grid (mesh size factor 0.85) has about 24k dofs, the size of the
+issue's per-step target (<= 1.5 s per Newton step at 24k dofs; stages 1-3 of the largest
+paper geometry <= 30 s). The cold-cache JIT time compiles the solver's three forms into an
+empty temporary cache; then every job is checked to compile nothing (a spy on FFCx's
+compile step). Run it on an otherwise idle machine and compare figures within one run.
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # before numpy/PETSc load BLAS
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+import argparse  # noqa: E402
+import logging  # noqa: E402
+import subprocess  # noqa: E402
+import sys  # noqa: E402
+import tempfile  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+from woundsweep.geometry import GeometrySpec, build_mesh  # noqa: E402
+
+__all__ = ["main"]
+
+
+def geometries() -> list[tuple[str, GeometrySpec]]:
+    """(name, spec): paper geometries at the ends and middle of the cell-count range."""
+
+    def cyl(t_d: float, f_s: float, f_p: float, f_w: float, a: float, m: float) -> GeometrySpec:
+        T = t_d * (1 + f_s)
+        return GeometrySpec.cylindrical(t_d, f_s * t_d, f_p * T, f_w * f_p * T, a, m)
+
+    def wedge(t_d: float, f_s: float, f_p: float, f_w: float, d: float, m: float) -> GeometrySpec:
+        T = t_d * (1 + f_s)
+        return GeometrySpec.wedge(t_d, f_s * t_d, f_p * T, f_w * f_p * T, d * T, m)
+
+    return [
+        ("smallest: cyl f_p=1 f_w=0.5 m=0.3", cyl(1.0, 0.5, 1, 0.5, 0.0, 0.3)),
+        ("median: wedge f_p=2 f_w=0.3 m=0.5", wedge(1.0, 1.0, 2, 0.3, 0.5, 0.5)),
+        ("largest: wedge f_p=3 f_w=0.3 m=0.7", wedge(1.0, 2.0, 3, 0.3, 0.7, 0.7)),
+        ("24k dofs: wedge f_p=3 f_w=0.3 m=0.85", wedge(1.0, 2.0, 3, 0.3, 0.7, 0.85)),
+    ]
+
+
+def blas() -> str:
+    try:
+        out = subprocess.run(
+            ["update-alternatives", "--query", "libblas.so.3-x86_64-linux-gnu"],
+            capture_output=True,
+            text=True,
+            timeout=10,
+        ).stdout
+    except (OSError, subprocess.TimeoutExpired):
+        return "unknown"
+    for line in out.splitlines():
+        if line.startswith("Value:"):
+            return line.split(":", 1)[1].strip()
+    return "unknown"
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--no-cold", action="store_true", help="skip the cold-cache JIT run")
+    parser.add_argument("--skin", default="soft", help="skin type [soft: the largest TSF]")
+    parser.add_argument("--orientation", type=float, default=90.0)
+    args = parser.parse_args(argv)
+    logging.getLogger().setLevel(logging.WARNING)
+
+    import ffcx.codegeneration.jit as ffcx_jit
+
+    from woundsweep import compat
+    from woundsweep.stages import JobMaterials, WoundModel
+
+    compiled: list[str] = []
+    real = ffcx_jit._compile_objects
+
+    def spy(decl, ufl_objects, names, module_name, *a, **k):  # type: ignore[no-untyped-def]
+        compiled.append(module_name)
+        return real(decl, ufl_objects, names, module_name, *a, **k)
+
+    ffcx_jit._compile_objects = spy
+    print(f"DOLFINx {compat.DOLFINX_VERSION}; BLAS {blas()}; "
+          f"OPENBLAS_NUM_THREADS={os.environ.get('OPENBLAS_NUM_THREADS')}")  # fmt: skip
+    print(f"job: skin {args.skin}, orientation {args.orientation:g} deg, stages 1-3\n")
+
+    meshes = []
+    for name, spec in geometries():
+        t0 = time.perf_counter()
+        meshes.append((name, build_mesh(spec), time.perf_counter() - t0))
+
+    if not args.no_cold:
+        with tempfile.TemporaryDirectory() as cache:
+            t0 = time.perf_counter()
+            model = WoundModel(meshes[0][1], jit=compat.jit_options(cache))
+            print(
+                f"JIT, cold cache: {model.jit_time_s:.1f} s for the residual, Jacobian and "
+                f"von Mises forms ({len(compiled)} compiles; model {time.perf_counter() - t0:.1f} s)"
+            )
+    compiled.clear()
+    WoundModel(meshes[0][1])  # warm the default cache if it is cold (not timed)
+    warm_compiles = len(compiled)
+    compiled.clear()
+
+    head = (
+        f"{'stage':>5} {'status':<12}{'newton':>7}{'incr':>5}{'time s':>8}"
+        f"{'asm/step s':>11}{'fac/step s':>11}{'sol+res s':>10}"
+    )
+    materials = JobMaterials.table2(args.skin, args.orientation)
+    for name, mesh, t_mesh in meshes:
+        t0 = time.perf_counter()
+        model = WoundModel(mesh)
+        t_model = time.perf_counter() - t0
+        dofs = 3 * len(model.node_input)
+        print(f"== {name}: {len(mesh.cells)} cells, {dofs} dofs "
+              f"(mesh {t_mesh:.2f} s, model+forms {t_model:.2f} s)")  # fmt: skip
+        print(head)
+        model.set_materials(materials)
+        total = 0.0
+        for k in (1, 2, 3):
+            out = model.run_stage(k)
+            s = out.solve
+            n = max(s.iterations, 1)
+            total += out.time_s
+            print(
+                f"{k:>5} {s.status:<12}{s.iterations:>7}{s.increments:>5}{out.time_s:>8.2f}"
+                f"{s.assembly_time_s / n:>11.3f}{s.factor_time_s / n:>11.3f}"
+                f"{s.solve_time_s + s.residual_time_s:>10.2f}"
+            )
+            if s.status != "converged":
+                break
+        print(f"stages 1-3: {total:.2f} s\n")
+    print(f"forms compiled while solving the jobs above: {len(compiled)} "
+          f"(warm-up before them: {warm_compiles})")  # fmt: skip
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,246 @@
+"""`woundsweep solve`: stress statistics, exit statuses, output file, JIT reuse."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from woundsweep.errors import SolverError
+from woundsweep.solve import StageResult, parse_stage_range, stress_summary
+
+REPO = Path(__file__).resolve().parent.parent
+
+SMALL_SWEEP = {
+    "name": "solve-test",
+    "grid": {
+        "dermal_thickness_mm": [1],
+        "subcutis_thickness_factor": [1],
+        "patch_size_factor": [2],
+        "wound_width_factor": [0.3],
+        "mesh_size_factor": [0.3],
+        "skin_type": ["stiff", "soft"],
+        "orientation_deg": [0, 45],
+    },
+    "shapes": {"cylindrical": {"wound_aspect_factor": [0]}, "wedge": {"wound_depth_factor": [0.3]}},
+}
+
+
+# -- statistics (no DOLFINx) ------------------------------------------------------------------
+
+
+def test_volume_weighted_p99() -> None:
+    vm = np.arange(1.0, 101.0)  # 100 cells
+    vol = np.ones(100)
+    one_tet = np.array([[0, 1, 2, 3]] * 100)
+    mid = np.zeros((100, 3))
+    assert stress_summary(vm, vol, one_tet, mid)["p99_von_mises_kPa"] == 99.0
+    # With the top cell holding 2 of 101 volume units, cells below it hold only 98%.
+    vol[-1] = 2.0
+    assert stress_summary(vm, vol, one_tet, mid)["p99_von_mises_kPa"] == 100.0
+    # Many tiny cells of high stress (a finely meshed corner) do not move it.
+    vm2 = np.r_[np.full(90, 5.0), np.full(10, 500.0)]
+    vol2 = np.r_[np.full(90, 1.0), np.full(10, 1e-4)]
+    assert stress_summary(vm2, vol2, one_tet, mid)["p99_von_mises_kPa"] == 5.0
+
+
+def test_nodal_p99_max_and_location() -> None:
+    # Two tets sharing face (1, 2, 3); nodal values: 0 -> 1, 4 -> 3, shared -> (1*1 + 3*3)/4.
+    cells = np.array([[0, 1, 2, 3], [4, 1, 2, 3]])
+    vm = np.array([1.0, 3.0])
+    vol = np.array([1.0, 3.0])
+    mid = np.array([[0.1, 0.2, 0.3], [0.4, 0.5, 0.6]])
+    s = stress_summary(vm, vol, cells, mid)
+    nodal = np.array([1.0, 2.5, 2.5, 2.5, 3.0])
+    assert s["p99_von_mises_nodal_kPa"] == pytest.approx(np.percentile(nodal, 99))
+    assert s["max_von_mises_kPa"] == 3.0
+    assert (s["max_location_x_mm"], s["max_location_y_mm"], s["max_location_z_mm"]) == (
+        0.4,
+        0.5,
+        0.6,
+    )
+
+
+def test_parse_stage_range() -> None:
+    assert parse_stage_range("1-3") == (1, 3)
+    assert parse_stage_range("2") == (2, 2)
+    for bad in ("0-2", "3-1", "x", "1-7", "1-2-3"):
+        with pytest.raises(SolverError):
+            parse_stage_range(bad)
+    with pytest.raises(SolverError, match="not implemented"):
+        parse_stage_range("1-6")
+
+
+def test_stage_result_fields_match_the_design_contract() -> None:
+    from woundsweep.store import STAGE_FIELDS
+
+    assert set(StageResult._fields) == {"stage", "status", *STAGE_FIELDS}
+
+
+# -- the command ------------------------------------------------------------------------------
+
+
+def _run_dir(tmp_path: Path, solver: dict | None = None) -> Path:
+    from woundsweep.cli import main
+
+    sweep = dict(SMALL_SWEEP)
+    if solver:
+        sweep["solver"] = solver
+    path = tmp_path / "sweep.yaml"
+    path.write_text(yaml.safe_dump(sweep))
+    run = tmp_path / "run"
+    assert main(["generate", str(path), "--out", str(run)]) == 0
+    return run
+
+
+@pytest.fixture(scope="module")
+def run_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return _run_dir(tmp_path_factory.mktemp("solve"))
+
+
+@pytest.mark.fem
+def test_solve_writes_the_design_output(run_dir: Path, capsys: pytest.CaptureFixture) -> None:
+    import h5py
+
+    from woundsweep.cli import main
+    from woundsweep.grid import load_run
+    from woundsweep.store import read_solver_output
+
+    out = run_dir / "job0.h5"
+    assert main(["solve", str(run_dir), "--job", "0", "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "converged" in text and text.count("converged") == 3
+    row = load_run(run_dir).manifest.iloc[0]
+    with h5py.File(out, "r") as f:
+        assert f.attrs["job_id"] == row["job_id"] and f.attrs["units"] == "mm, kPa, mN, s"
+        rows = json.loads(f.attrs["stage_results"])
+        n_points, n_cells = len(f["mesh/points"]), len(f["mesh/cells"])
+        for k in (1, 2, 3):
+            assert f[f"stage_{k}/displacement_mm"].shape == (n_points, 3)
+            assert f[f"stage_{k}/von_mises_kPa"].shape == (n_cells,)
+            assert f[f"stage_{k}/displacement_mm"].dtype == np.float32
+        u2 = f["stage_2/displacement_mm"][:]
+        pts = f["mesh/points"][:]
+    assert [r["status"] for r in rows] == ["converged"] * 3
+    assert all(set(StageResult._fields) <= set(r) for r in rows)
+    assert rows[0]["cells"] == n_cells and rows[0]["dofs"] == 3 * n_points
+    # The written displacement is in the input point order: zone edges meet at x = w/2.
+    w = float(row["wound_width_mm"])
+    wound_top = (np.abs(pts[:, 2]) < 1e-12) & (np.abs(pts[:, 1]) < 1e-12)
+    rim = wound_top & (np.abs(np.abs(pts[:, 0] - w / 2) - w / 2) < 1e-9)
+    assert rim.sum() == 2
+    np.testing.assert_allclose(pts[rim, 0] + u2[rim, 0], w / 2, atol=1e-5)  # float32 output
+    # The store accepts the file.
+    got = read_solver_output(out, str(row["job_id"]), (1, 3))
+    assert sorted(got.stages) == [1, 2, 3]
+
+
+@pytest.mark.fem
+def test_unconverged_stage_exits_3_and_later_stages_are_not_run(tmp_path: Path) -> None:
+    import h5py
+
+    from woundsweep.cli import main
+
+    run = _run_dir(tmp_path, solver={"max_iterations": 1, "max_load_cuts": 0})
+    out = tmp_path / "fail.h5"
+    assert main(["solve", str(run), "--job", "0", "--out", str(out)]) == 3
+    with h5py.File(out, "r") as f:
+        rows = json.loads(f.attrs["stage_results"])
+        groups = set(f.keys())
+    assert [r["status"] for r in rows] == ["max-iterations", "not-run", "not-run"]
+    assert groups == {"mesh"}  # unconverged states are not written as fields
+
+
+def test_invalid_requests_exit_2(run_dir: Path, capsys: pytest.CaptureFixture) -> None:
+    from woundsweep.cli import main
+
+    assert main(["solve", str(run_dir), "--job", "0", "--stages", "1-6"]) == 2
+    assert "not implemented" in capsys.readouterr().err
+    assert main(["solve", str(run_dir / "nope"), "--job", "0"]) == 2
+
+
+@pytest.mark.fem
+def test_unknown_job_exits_2(run_dir: Path, capsys: pytest.CaptureFixture) -> None:
+    from woundsweep.cli import main
+
+    assert main(["solve", str(run_dir), "--job", "999"]) == 2
+    assert "999" in capsys.readouterr().err
+
+
+def test_fault_switch_fires_before_solving(run_dir: Path) -> None:
+    env = dict(os.environ, WOUNDSWEEP_FAULT="exit:7@1")
+    cmd = [sys.executable, "-m", "woundsweep", "solve", str(run_dir), "--stages", "1-3"]
+    assert subprocess.run([*cmd, "--job", "1"], env=env, capture_output=True).returncode == 7
+    # Another job is untouched by a targeted fault (it fails later, on the bad stage range).
+    res = subprocess.run([*cmd[:-1], "1-6", "--job", "2"], env=env, capture_output=True)
+    assert res.returncode == 2
+
+
+# -- JIT reuse --------------------------------------------------------------------------------
+
+
+def _different_job(run_dir: Path) -> int:
+    from woundsweep.grid import load_run
+
+    m = load_run(run_dir).manifest
+    first = m.iloc[0]
+    other = m[
+        (m["geometry_id"] != first["geometry_id"])
+        & (m["skin_type"] != first["skin_type"])
+        & (m["orientation_deg"] != first["orientation_deg"])
+    ]
+    return int(other.iloc[0]["job_index"])
+
+
+@pytest.mark.fem
+def test_second_job_with_other_parameters_compiles_nothing(
+    run_dir: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Every parameter is a Constant: another geometry, skin type and orientation reuse the
+    compiled forms (counted at FFCx's compile step, which a cache hit never reaches)."""
+    import ffcx.codegeneration.jit as ffcx_jit
+
+    from woundsweep.solve import solve_job
+
+    compiled: list[str] = []
+    real = ffcx_jit._compile_objects
+
+    def spy(decl, ufl_objects, names, module_name, *args, **kwargs):
+        compiled.append(module_name)
+        return real(decl, ufl_objects, names, module_name, *args, **kwargs)
+
+    monkeypatch.setattr(ffcx_jit, "_compile_objects", spy)
+    first = solve_job(run_dir, 0, (1, 3), tmp_path / "a.h5")
+    assert first.exit_code == 0
+    compiled.clear()
+    second = solve_job(run_dir, _different_job(run_dir), (1, 3), tmp_path / "b.h5")
+    assert second.exit_code == 0
+    assert compiled == []
+
+
+@pytest.mark.fem
+@pytest.mark.slow
+def test_cold_cache_compiles_each_form_once_per_machine(run_dir: Path, tmp_path: Path) -> None:
+    """Fresh processes on an empty JIT cache: the first job compiles, a second job with other
+    parameters compiles nothing (FFCx 0.5 used to recompile the Jacobian under a new hash)."""
+    cache = tmp_path / "xdg"
+    env = dict(os.environ, XDG_CACHE_HOME=str(cache), OPENBLAS_NUM_THREADS="1")
+    base = [sys.executable, "-m", "woundsweep", "solve", str(run_dir), "--stages", "1-2"]
+
+    def modules() -> set[str]:
+        return {p.name for p in (cache / "fenics").glob("libffcx_*.so")}
+
+    res = subprocess.run([*base, "--job", "0", "--out", str(tmp_path / "a.h5")], env=env)
+    assert res.returncode == 0
+    after_first = modules()
+    assert len([m for m in after_first if m.startswith("libffcx_forms")]) == 3
+    job = str(_different_job(run_dir))
+    res = subprocess.run([*base, "--job", job, "--out", str(tmp_path / "b.h5")], env=env)
+    assert res.returncode == 0
+    assert modules() == after_first

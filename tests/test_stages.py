@@ -1,0 +1,302 @@
+"""Stages 1-3 on coarse meshes: equivalence of the lateral conditions, symmetry, closure.
+
+Unwounded patches are structured tetrahedral boxes built here, tagged from midpoints; wounded
+ones come from woundsweep.geometry (coarsest size factor).
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+import pytest
+
+from woundsweep.materials import homogeneous_state
+
+pytestmark = pytest.mark.fem
+
+SKIN_TYPES = ("normal", "stiff", "soft")
+T_D, T_TOTAL, HALF = 1.0, 2.0, 2.0  # dermis and total thickness, patch half-length (mm)
+
+
+class Patch(NamedTuple):
+    points: np.ndarray
+    cells: np.ndarray
+    cell_tags: np.ndarray
+    facets: np.ndarray
+    facet_tags: np.ndarray
+
+
+def box_patch(n_xy: int = 6, rotate: bool = False) -> Patch:
+    """Two-layer square patch [-HALF, HALF]^2 x [-T_TOTAL, 0], six tets per grid box.
+
+    ``rotate`` turns the points by +90 degrees about z (same cells), for the symmetry test.
+    """
+    xs = np.linspace(-HALF, HALF, n_xy + 1)
+    zs = np.r_[np.linspace(-T_TOTAL, -T_D, 3)[:-1], np.linspace(-T_D, 0.0, 4)]
+    nx, ny, nz = n_xy, n_xy, len(zs) - 1
+    X, Y, Z = np.meshgrid(xs, xs, zs, indexing="ij")
+    pts = np.c_[X.ravel(), Y.ravel(), Z.ravel()]
+    idx = lambda i, j, k: (i * (ny + 1) + j) * (nz + 1) + k  # noqa: E731
+    ii, jj, kk = (a.ravel() for a in np.meshgrid(range(nx), range(ny), range(nz), indexing="ij"))
+    corners = [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0), (0, 0, 1), (1, 0, 1), (1, 1, 1),
+               (0, 1, 1)]  # fmt: skip
+    V = np.stack([idx(ii + a, jj + b, kk + c) for a, b, c in corners], axis=1)
+    tets = [(0, 1, 2, 6), (0, 2, 3, 6), (0, 3, 7, 6), (0, 7, 4, 6), (0, 4, 5, 6), (0, 5, 1, 6)]
+    cells = np.concatenate([V[:, list(t)] for t in tets])
+    if rotate:
+        pts = np.c_[-pts[:, 1], pts[:, 0], pts[:, 2]]
+    mid = pts[cells].mean(axis=1)
+    ctags = np.where(mid[:, 2] > -T_D, 1, 2).astype(np.int32)
+    faces = np.concatenate([cells[:, [1, 2, 3]], cells[:, [0, 2, 3]], cells[:, [0, 1, 3]],
+                            cells[:, [0, 1, 2]]])  # fmt: skip
+    uniq, count = np.unique(np.sort(faces, axis=1), axis=0, return_counts=True)
+    bf = uniq[count == 1]
+    c = pts[bf].mean(axis=1)
+    ft = np.zeros(len(bf), dtype=np.int32)
+    e = 1e-9
+    ft[np.abs(c[:, 0] + HALF) < e], ft[np.abs(c[:, 0] - HALF) < e] = 11, 12
+    ft[np.abs(c[:, 1] + HALF) < e], ft[np.abs(c[:, 1] - HALF) < e] = 13, 14
+    ft[np.abs(c[:, 2] + T_TOTAL) < e], ft[np.abs(c[:, 2]) < e] = 15, 16
+    assert (ft > 0).all()
+    return Patch(pts, cells, ctags, bf, ft)
+
+
+def homogeneous_field(points: np.ndarray, skin: str, angle: float) -> np.ndarray:
+    """Displacement of the per-layer homogeneous pre-stretch (bottom fixed at z = -T_TOTAL)."""
+    from woundsweep.stages import JobMaterials
+
+    mats = JobMaterials.table2(skin, angle)
+    l_d = homogeneous_state(mats.dermis, mats.tsf).lambda3
+    l_s = homogeneous_state(mats.subcutis, mats.tsf).lambda3
+    x, y, z = points.T
+    uz = np.where(
+        z <= -T_D,
+        (l_s - 1) * (z + T_TOTAL),
+        (l_s - 1) * (T_TOTAL - T_D) + (l_d - 1) * (z + T_D),
+    )
+    return np.c_[(mats.tsf - 1) * x, (mats.tsf - 1) * y, uz]
+
+
+def rel_l2(a: np.ndarray, b: np.ndarray) -> float:
+    return float(np.linalg.norm(a - b) / np.linalg.norm(b))
+
+
+@pytest.fixture(scope="module")
+def box_model():
+    from woundsweep.stages import WoundModel
+
+    return WoundModel(box_patch())
+
+
+@pytest.fixture(scope="module")
+def cylinder_mesh():
+    from woundsweep.geometry import GeometrySpec, build_mesh
+
+    # t_d = 1, subcutis factor 1, patch factor 2 (L = 4), width factor 0.3, aspect 0, m = 0.3
+    return build_mesh(GeometrySpec.cylindrical(1.0, 1.0, 4.0, 1.2, 0.0, 0.3))
+
+
+@pytest.mark.parametrize("skin", SKIN_TYPES)
+@pytest.mark.parametrize("angle", [0.0, 90.0])
+def test_unwounded_stage2_reproduces_stage1(box_model, skin: str, angle: float) -> None:
+    """Lateral traction of healthy skin (stage 2) gives the Dirichlet pre-tension (stage 1)."""
+    from woundsweep.stages import JobMaterials
+
+    m = box_model
+    m.set_materials(JobMaterials.table2(skin, angle))
+    assert m.run_stage(1).solve.status == "converged"
+    u1 = m.displacement_input()
+    out2 = m.run_stage(2)
+    assert out2.solve.status == "converged"
+    u2 = m.displacement_input()
+    assert rel_l2(u2, u1) < 0.01
+    # Both are the analytic per-layer homogeneous state (P1 represents it exactly).
+    hom = homogeneous_field(m.points, skin, angle)
+    assert rel_l2(u1, hom) < 1e-6 and rel_l2(u2, hom) < 1e-6
+    # The gauge points carry no load.
+    assert out2.diagnostics["pin_reaction_max_mN"] < 1e-8 * out2.diagnostics["lateral_force_mN"]
+
+
+@pytest.mark.parametrize("skin", SKIN_TYPES)
+def test_unwounded_oblique_orientation(box_model, skin: str) -> None:
+    """At 45 degrees the healthy-skin traction has shear (P_xy != 0). Stage 2 applies it and
+    gives the homogeneous state; stage 1's lateral faces are shear-free while its deep face is
+    held, so the patch cannot take that state: the two stages differ by a few percent."""
+    from woundsweep.stages import JobMaterials
+
+    m = box_model
+    m.set_materials(JobMaterials.table2(skin, 45.0))
+    m.run_stage(1)
+    u1 = m.displacement_input()
+    m.run_stage(2)
+    u2 = m.displacement_input()
+    hom = homogeneous_field(m.points, skin, 45.0)
+    assert rel_l2(u2, hom) < 1e-6
+    diff = rel_l2(u2, u1)
+    print(f"\n{skin} 45 deg: stage 2 vs stage 1 relative L2 difference {diff:.3%}")
+    assert diff > 0.01
+
+
+def test_lateral_facets_split_by_layer(box_model) -> None:
+    """The derived lateral facet ids hold exactly each layer's share of the four side faces."""
+    import ufl
+
+    from woundsweep import compat
+    from woundsweep.stages import LATERAL_DERMIS, LATERAL_SUBCUTIS
+
+    m = box_model
+    ds = ufl.Measure("ds", domain=m.mesh, subdomain_data=m.solver_facet_mt)
+    one = dolfinx_constant(m.mesh, 1.0)
+    perimeter = 8 * HALF
+    for tag, thickness in ((LATERAL_DERMIS, T_D), (LATERAL_SUBCUTIS, T_TOTAL - T_D)):
+        form = compat.compile_form(one * ds(tag, metadata={"quadrature_degree": 1}))
+        area = assemble_scalar(form)
+        assert area == pytest.approx(perimeter * thickness, rel=1e-12)
+
+
+def dolfinx_constant(mesh, value: float):
+    import dolfinx.fem
+
+    return dolfinx.fem.Constant(mesh, float(value))
+
+
+def assemble_scalar(form) -> float:
+    import dolfinx.fem
+
+    return float(dolfinx.fem.assemble_scalar(form))
+
+
+@pytest.mark.parametrize("angle", [0.0, 45.0])
+def test_rotating_the_orientation_by_90_degrees_rotates_the_solution(angle: float) -> None:
+    """Patch P at orientation t and the same patch turned by +90 degrees at t + 90 are the same
+    physical problem: equal von Mises per cell, and stage-1 displacements rotated by 90."""
+    from woundsweep.stages import JobMaterials, WoundModel
+
+    a = WoundModel(box_patch(rotate=False))
+    b = WoundModel(box_patch(rotate=True))
+    a.set_materials(JobMaterials.table2("stiff", angle))
+    b.set_materials(JobMaterials.table2("stiff", angle + 90.0))
+    R = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    for stage in (1, 2):
+        assert a.run_stage(stage).solve.status == "converged"
+        assert b.run_stage(stage).solve.status == "converged"
+        vm_a = a.von_mises_cells()[np.argsort(a.cell_input)]
+        vm_b = b.von_mises_cells()[np.argsort(b.cell_input)]
+        np.testing.assert_allclose(vm_b, vm_a, rtol=1e-7, atol=1e-9 * vm_a.max())
+        if stage == 1:
+            vm_stage1 = vm_a
+            ua, ub = a.displacement_input(), b.displacement_input()
+            np.testing.assert_allclose(ub, ua @ R.T, atol=1e-9)
+    # The field is not trivially invariant: at 45 degrees stage 1 is inhomogeneous, and the
+    # same (unrotated) patch at 135 degrees gives a different cellwise field.
+    if angle == 45.0:
+        c = WoundModel(box_patch(rotate=False))
+        c.set_materials(JobMaterials.table2("stiff", 135.0))
+        c.run_stage(1)
+        vm_c = c.von_mises_cells()[np.argsort(c.cell_input)]
+        assert np.max(np.abs(vm_c - vm_stage1)) > 0.01 * vm_stage1.max()
+
+
+def test_stage2_closes_the_wound_and_stage3_reports_the_gap(cylinder_mesh) -> None:
+    from woundsweep.stages import JobMaterials, WoundModel
+
+    m = WoundModel(cylinder_mesh)
+    w = 1.2
+    assert m.x_c == pytest.approx(w / 2)
+    assert len(m.zone_left_nodes) > 3 and len(m.zone_right_nodes) > 3
+    # The zone is the middle third of the length and the upper half of the depth.
+    zone_X = m.X[m.zone_nodes]
+    assert np.all(np.abs(zone_X[:, 1]) <= 4.0 / 3.0 + 1e-9)
+    assert np.all(zone_X[:, 2] >= -0.5 * m.wound_depth - 1e-9)
+    m.set_materials(JobMaterials.table2("normal", 0.0))
+
+    s1 = m.run_stage(1)
+    assert s1.solve.status == "converged"
+    gap1 = s1.diagnostics["closure_gap_mm"]
+    assert gap1 > w  # the pre-tension widens the opening
+
+    s2 = m.run_stage(2)
+    assert s2.solve.status == "converged"
+    x = m.X[:, 0] + m.u.x.array.reshape(-1, 3)[:, 0]
+    assert np.max(np.abs(x[m.zone_nodes] - w / 2)) < 1e-8
+    assert abs(s2.diagnostics["closure_gap_mm"]) < 1e-8
+    # Wound-surface nodes outside the zone stay open.
+    wound_nodes = np.unique(
+        m.input_node[np.unique(cylinder_mesh.facets[cylinder_mesh.facet_tags == 17])]
+    )
+    outside = np.setdiff1d(wound_nodes, m.zone_nodes)
+    assert np.max(np.abs(x[outside] - w / 2)) > 0.1 * w
+    f_left, f_right = (
+        s2.diagnostics["closure_force_left_mN"],
+        s2.diagnostics["closure_force_right_mN"],
+    )
+    assert f_left > 0 > f_right
+    assert abs(f_left + f_right) < 1e-6 * f_left  # the mesh is mirror-symmetric
+    assert s2.diagnostics["pin_reaction_max_mN"] < 1e-6 * s2.diagnostics["lateral_force_mN"]
+
+    area2 = m.deformed_zone_area("left") + m.deformed_zone_area("right")
+    s3 = m.run_stage(3)
+    assert s3.solve.status == "converged"
+    gap3 = s3.diagnostics["closure_gap_mm"]
+    print(f"\nclosure gap: stage 1 {gap1:.4f} mm, stage 3 {gap3:.4f} mm (w = {w} mm)")
+    assert np.isfinite(gap3) and abs(gap3) < gap1
+    # The traction times the stage-2 deformed zone area is the stage-2 closing force.
+    tau = s3.diagnostics["closure_traction_kPa"]
+    assert tau * area2 == pytest.approx(f_left - f_right, rel=1e-12)
+
+
+def test_stiff_skin_has_higher_maximal_stress_than_soft(cylinder_mesh) -> None:
+    from woundsweep.solve import run_stages
+    from woundsweep.stages import JobMaterials, WoundModel
+
+    m = WoundModel(cylinder_mesh)
+    p99 = {}
+    for skin in ("stiff", "soft"):
+        recs = run_stages(m, JobMaterials.table2(skin, 0.0), 3)
+        assert [r.result.status for r in recs] == ["converged"] * 3
+        p99[skin] = [r.result.p99_von_mises_kPa for r in recs]
+    print(f"\np99 von Mises by stage: stiff {p99['stiff']}, soft {p99['soft']}")
+    assert all(s > t for s, t in zip(p99["stiff"], p99["soft"]))
+
+
+def test_unconverged_stage_stops_later_stages(box_model) -> None:
+    from woundsweep.newton import NewtonSettings, NewtonSolver
+    from woundsweep.solve import run_stages
+    from woundsweep.stages import JobMaterials
+
+    m = box_model
+    saved = m.newton
+    try:
+        m.newton = NewtonSolver(m, m.A, NewtonSettings(max_iterations=1, max_load_cuts=1))
+        recs = run_stages(m, JobMaterials.table2("soft", 0.0), 3)
+    finally:
+        m.newton = saved
+    assert [r.result.status for r in recs] == ["max-iterations", "not-run", "not-run"]
+    assert recs[0].displacement_mm is None and recs[0].result.p99_von_mises_kPa is None
+
+
+def test_newton_statuses_inverted_and_linear_solver_failed(box_model) -> None:
+    from woundsweep.newton import NewtonSettings, NewtonSolver
+    from woundsweep.stages import JobMaterials
+
+    m = box_model
+    m.set_materials(JobMaterials.table2("normal", 0.0))
+    # Push one top node 10 patch thicknesses down in a single step: every relaxation down to
+    # gamma_min still inverts its cells.
+    newton = NewtonSolver(m, m.A, NewtonSettings(gamma_min=0.2, max_strain_step=1e9))
+    top = int(np.argmax(m.X[:, 2] - np.abs(m.X[:, 0]) - np.abs(m.X[:, 1])))
+    rows = np.array(
+        [*(3 * m.bottom_nodes + 0), *(3 * m.bottom_nodes + 1), *(3 * m.bottom_nodes + 2),
+         3 * top + 2], dtype=np.int32)  # fmt: skip
+    values = np.zeros(len(rows))
+    values[-1] = -10 * T_TOTAL
+    res = newton.solve(rows, values)
+    assert res.status == "inverted"
+    np.testing.assert_array_equal(m.u.x.array, 0.0)  # the last accepted state is kept
+    # No Dirichlet condition at all: the tangent is singular (rigid motions).
+    newton = NewtonSolver(m, m.A, NewtonSettings())
+    offset = np.zeros(len(m.u.x.array))
+    offset[2] = 1.0  # a load, so that a step is needed
+    res = newton.solve(np.zeros(0, dtype=np.int32), np.zeros(0), offset)
+    assert res.status == "linear-solver-failed"

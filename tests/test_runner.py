@@ -137,8 +137,14 @@ def test_fault_switch_in_a_process(fault: str, returncode: int | None) -> None:
 _COMPILE = """
 import sys, ufl
 from ffcx.codegeneration.jit import compile_forms
-el = ufl.VectorElement("Lagrange", ufl.tetrahedron, 1)
-V = ufl.FunctionSpace(ufl.Mesh(el), el)
+try:  # basix >= 0.7 (DOLFINx >= 0.7): elements come from basix.ufl
+    import basix.ufl
+    el = basix.ufl.element("Lagrange", "tetrahedron", 1, shape=(3,))
+    mesh = ufl.Mesh(basix.ufl.element("Lagrange", "tetrahedron", 1, shape=(3,)))
+except ImportError:
+    el = ufl.VectorElement("Lagrange", ufl.tetrahedron, 1)
+    mesh = ufl.Mesh(el)
+V = ufl.FunctionSpace(mesh, el)
 u, v = ufl.TrialFunction(V), ufl.TestFunction(V)
 compile_forms([ufl.inner(ufl.grad(u), ufl.grad(v)) * ufl.dx], cache_dir=sys.argv[1], timeout=1)
 print("compiled")

@@ -61,7 +61,8 @@ def cli() -> None:
 def main(argv: list[str] | None = None) -> int:
     """Entry point: user errors become one line on stderr and exit status 2 (no traceback)."""
     try:
-        cli.main(args=argv, prog_name="woundsweep", standalone_mode=False)
+        # With standalone_mode=False click returns ctx.exit()'s code instead of raising Exit.
+        rv = cli.main(args=argv, prog_name="woundsweep", standalone_mode=False)
     except WoundsweepError as err:
         click.echo(f"woundsweep: error: {err}", err=True)
         return err.exit_code
@@ -73,7 +74,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     except click.exceptions.Exit as err:
         return err.exit_code
-    return 0
+    return rv if isinstance(rv, int) else 0
 
 
 if __name__ == "__main__":

@@ -119,13 +119,19 @@ DEFAULTS: dict[str, Any] = {
         "closure_zone": {"y_fraction": 1.0 / 3.0, "depth_fraction": 0.5},
         "contact_penalty_GPa": [1.0, 5.0, 100.0],
     },
+    # Numerics (woundsweep.newton.NewtonSettings documents each key).
     "solver": {
         "quadrature_degree": 1,
         "max_iterations": 60,
         "rtol": 1e-8,
         "atol": 1e-10,
-        "load_steps": 4,
+        "stol": 1e-8,
+        "load_steps": 1,
         "max_load_cuts": 6,
+        "max_strain_step": 0.5,
+        "gamma_min": 1.0 / 64.0,
+        "residual_growth": 4.0,
+        "divergence_factor": 1e6,
     },
     "analysis": {
         "quantiles": 8,

@@ -151,6 +151,7 @@ class NewtonSolver:
         pc.setFactorSolverType("mumps")
         self.ksp.setErrorIfNotConverged(False)
         self._factored = False
+        self._factored_rows = np.zeros(0, dtype=np.int32)
         self.gamma = 1.0
 
     # -- pieces ---------------------------------------------------------------------------
@@ -178,6 +179,7 @@ class NewtonSolver:
             self._factored = True
         self.ksp.setUp()
         self.ksp.getPC().setUp()  # numeric factorisation now, so it is timed on its own
+        self._factored_rows = rows.copy()
         return t1 - t0, time.perf_counter() - t1
 
     def _linear_solve(self, rhs: np.ndarray) -> np.ndarray | None:
@@ -253,7 +255,8 @@ class NewtonSolver:
                 return result(DIVERGED)
             rhs = -r_free
             rhs[rows] = bc_err
-            if res_ok and bc_ok and self._factored and not chord_done:
+            same_rows = np.array_equal(rows, self._factored_rows)
+            if res_ok and bc_ok and self._factored and same_rows and not chord_done:
                 # Chord step: the residual is small; measure the increment with the old factors.
                 t0 = time.perf_counter()
                 du = self._linear_solve(rhs)

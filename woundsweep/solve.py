@@ -29,7 +29,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from . import __version__
-from .errors import SolverError, WoundsweepError
+from .errors import GeometryError, SolverError, WoundsweepError
 from .newton import CONVERGED, NOT_RUN, NewtonSettings
 
 __all__ = [
@@ -289,13 +289,16 @@ def solve_job(
         raise SolverError(f"job {job_index}: unknown skin type {skin!r}")
     materials = JobMaterials.from_sweep(run.sweep.materials, skin, angle)
     solver = run.sweep.solver
-    model = WoundModel(
-        mesh,
-        quadrature_degree=int(solver.get("quadrature_degree", 1)),
-        zone=ClosureZone.from_sweep(run.sweep.stages),
-        settings=NewtonSettings.from_mapping(solver),
-        jit=jit,
-    )
+    try:
+        model = WoundModel(
+            mesh,
+            quadrature_degree=int(solver.get("quadrature_degree", 1)),
+            zone=ClosureZone.from_sweep(run.sweep.stages),
+            settings=NewtonSettings.from_mapping(solver),
+            jit=jit,
+        )
+    except ValueError as err:  # the mesh's tags or numbering do not fit the contract
+        raise GeometryError(f"job {job_index}: unusable mesh: {err}") from None
     records = run_stages(model, materials, stages[1], echo=echo)
     reported = [r for r in records if r.result.stage >= stages[0]]
     ok = all(r.result.status == CONVERGED for r in records)

@@ -6,7 +6,7 @@ WS      := $(VENV)/bin/woundsweep
 DEMO_DIR ?= runs/demo
 PYTEST_ARGS ?=
 
-.PHONY: setup test test-fast demo bench lint format clean
+.PHONY: setup test test-fast test-dolfinx-latest demo bench lint format clean
 
 setup:
 	@bash scripts/setup.sh
@@ -18,9 +18,20 @@ test: setup
 test-fast: setup
 	$(PY) -m pytest -q -m "not fem and not slow" $(PYTEST_ARGS)
 
+# The fem tests + one demo job on DOLFINx 0.11 (Debian sid, cached debootstrap root under
+# /var/cache/woundsweep, ~3 min and 3.5 GB on first use; needs root), compared with 0.5.2.
+test-dolfinx-latest: setup
+	bash scripts/dolfinx-latest.sh $(if $(PYTEST_ARGS),-- $(PYTEST_ARGS))
+
+DEMO_STAGES ?= 1-6
+
 demo: setup
 	$(WS) generate sweeps/demo.yaml --out $(DEMO_DIR)
-	@echo "demo: manifest in $(DEMO_DIR)/manifest.parquet"
+	$(WS) run $(DEMO_DIR) --stages $(DEMO_STAGES)
+	$(WS) status $(DEMO_DIR)
+	$(WS) analyze $(DEMO_DIR)
+	@echo "demo: results in $(DEMO_DIR)/results (pandas.read_parquet), fields in $(DEMO_DIR)/fields,"
+	@echo "      analysis in $(DEMO_DIR)/analysis (report.md, metrics.json, figures)"
 
 bench: setup
 	@for b in benchmarks/bench_*.py; do echo "== $$b"; $(PY) $$b || exit 1; done

@@ -60,7 +60,7 @@ def test_regenerate_other_sweep_refused_then_forced_keeps_results(tmp_path: Path
     (rd / "results").mkdir()
     (rd / "results" / "job-x.parquet").write_bytes(b"precious")
     data = yaml.safe_load(DEMO.read_text())
-    data["grid"]["orientation_deg"] = [0, 45, 90]
+    data["grid"]["orientation_deg"] = [0, 45, 90]  # 32 -> 96 jobs
     other = tmp_path / "bigger.yaml"
     other.write_text(yaml.safe_dump(data))
     res = ws("generate", str(other), "--out", str(rd))
@@ -68,7 +68,7 @@ def test_regenerate_other_sweep_refused_then_forced_keeps_results(tmp_path: Path
     assert len(pd.read_parquet(rd / "manifest.parquet")) == 32
     res = ws("generate", str(other), "--out", str(rd), "--force")
     assert res.returncode == 0, res.stderr
-    assert len(pd.read_parquet(rd / "manifest.parquet")) == 48
+    assert len(pd.read_parquet(rd / "manifest.parquet")) == 96
     assert (rd / "results" / "job-x.parquet").read_bytes() == b"precious"
 
 

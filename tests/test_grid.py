@@ -125,8 +125,8 @@ def test_key_order_does_not_change_ids(paper: pd.DataFrame, tmp_path: Path) -> N
 def test_integer_and_float_values_hash_alike() -> None:
     data = yaml.safe_load(DEMO.read_text())
     a = expand(parse_sweep(data))
-    data["grid"]["dermal_thickness_mm"] = [1.0]
-    data["grid"]["orientation_deg"] = [0.0, 45.0]
+    data["grid"]["dermal_thickness_mm"] = [1.0, 2.0]
+    data["grid"]["orientation_deg"] = [0.0]
     b = expand(parse_sweep(data))
     assert a["job_id"].tolist() == b["job_id"].tolist()
 
@@ -136,7 +136,7 @@ def test_demo_sweep_is_small_and_mixed() -> None:
     assert 20 <= len(demo) <= 40
     assert set(demo["wound_shape"]) == {"cylindrical", "wedge"}
     assert demo["skin_type"].nunique() == 2
-    assert len(demo) == demo["geometry_id"].nunique() * 4
+    assert len(demo) == demo["geometry_id"].nunique() * 2
 
 
 def test_settings_defaults_are_table_2() -> None:

@@ -78,7 +78,7 @@ def test_geometries_stay_together(paper: pd.DataFrame, n: int) -> None:
 
 
 def test_more_shards_than_geometries_splits_jobs(demo: pd.DataFrame) -> None:
-    shards = partition(demo, 10)  # 8 geometries, 32 jobs
+    shards = partition(demo, 20)  # 16 geometries, 32 jobs
     assert all(len(s) > 0 for s in shards)
     assert sorted(np.concatenate(shards).tolist()) == list(range(32))
 

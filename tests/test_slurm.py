@@ -13,6 +13,7 @@ reason, where that needs root or apt-get and they are not available.
 
 from __future__ import annotations
 
+import datetime
 import json
 import os
 import shutil
@@ -206,7 +207,7 @@ def test_warmup_shard_on_a_sweep_with_one_job_per_geometry(tmp_path: Path) -> No
     path = tmp_path / "one.yaml"
     path.write_text(yaml.safe_dump(sweep))
     man = expand(load_sweep(path))
-    assert man["geometry_id"].nunique() == len(man) == 8
+    assert man["geometry_id"].nunique() == len(man) == 16
     w = warmup_shard(man)
     (only,) = partition(man, w.count)[w.index]
     cost = estimate_cost(man)
@@ -540,7 +541,18 @@ def test_demo_sweep_on_cluster(cluster: SlurmCluster, tmp_path: Path) -> None:
     classes = res.drop_duplicates("job_id")["failure_class"].value_counts()
     assert set(classes.index) <= {"converged", "not-converged", "mesh-failed"}, classes
     assert classes.get("converged", 0) > 0, classes
-    # The forms were compiled into the shared cache the scripts point at.
-    assert list((rd / "slurm" / "cache" / "fenics").glob("libffcx_forms_*.so"))
+    # The forms were compiled into the shared cache the scripts point at, by the warm-up:
+    # when its job went through every stage, no task compiled anything after it ended.
+    modules = list((rd / "slurm" / "cache" / "fenics").glob("libffcx_*.so"))
+    assert modules
+    man = pd.read_parquet(rd / "manifest.parquet")
+    warm = warmup_shard(man)
+    (warm_job,) = partition(man, warm.count)[warm.index]
+    warm_rows = res[res["job_index"] == warm_job]
+    assert set(warm_rows["shard"]) == {str(warm)}
+    if set(warm_rows["failure_class"]) == {"converged"}:
+        end = datetime.datetime.fromisoformat(cluster.job(ids[0])["EndTime"]).timestamp()
+        late = [p.name for p in modules if p.stat().st_mtime > end + 1]
+        assert not late, f"compiled after the warm-up: {late}"
     status = (rd / "slurm" / "logs" / f"followup-{ids[2]}.log").read_text()
     assert "32 of 32 stored" in status, status

@@ -160,14 +160,14 @@ def test_fields_final_and_none(run_dir: Path) -> None:
 def test_mesh_stored_once_per_geometry(run_dir: Path) -> None:
     m = _manifest(run_dir)
     same_geo = m.index[m["geometry_id"] == m["geometry_id"].iloc[0]].tolist()
-    assert len(same_geo) == 4
-    for i in same_geo[:3]:
+    assert len(same_geo) >= 2
+    for i in same_geo[:-1]:
         _store_converged(run_dir, i)
     # A job whose mesh differs from the stored one keeps its own copy.
-    _store_converged(run_dir, same_geo[3], mesh_seed=1)
+    _store_converged(run_dir, same_geo[-1], mesh_seed=1)
     meshes = sorted(p.name for p in (run_dir / "fields").glob("mesh-*.h5"))
     assert meshes == [f"mesh-{m['geometry_id'].iloc[0]}.h5"]
-    with h5py.File(run_dir / "fields" / f"{m['job_id'].iloc[same_geo[3]]}.h5") as f:
+    with h5py.File(run_dir / "fields" / f"{m['job_id'].iloc[same_geo[-1]]}.h5") as f:
         assert "mesh" in f and f.attrs["mesh_file"] == ""
 
 

@@ -16,7 +16,7 @@ from . import __version__
 __all__ = ["git_commit", "package_versions", "provenance"]
 
 PACKAGES = (
-    "numpy", "pandas", "pyarrow", "h5py", "gmsh", "xgboost", "scikit-learn", "click", "pyyaml",
+    "numpy", "scipy", "pandas", "pyarrow", "h5py", "gmsh", "xgboost", "scikit-learn", "click", "pyyaml",
     "matplotlib", "fenics-dolfinx", "fenics-ffcx", "fenics-ufl", "fenics-basix", "petsc4py",
 )  # fmt: skip
 

@@ -80,7 +80,13 @@ def _summary_line(s: RunSummary, run_dir: Path) -> str:
     help="Retries of transient failures (timeout, crashed).",
 )
 @click.option("--rerun-failed", is_flag=True, help="Also rerun jobs stored with a failure class.")
-@click.option("--stages", "stages_text", default="1-6", show_default=True, help="Stages A-B.")
+@click.option(
+    "--stages",
+    "stages_text",
+    default="1-3",
+    show_default=True,
+    help="Stages A-B (4-6, the contact stages, are not implemented yet).",
+)
 @click.option(
     "--fields",
     type=click.Choice(FIELDS_CHOICES),

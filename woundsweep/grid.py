@@ -16,6 +16,7 @@ import hashlib
 import itertools
 import json
 import math
+import re
 from pathlib import Path
 from typing import Any, NamedTuple
 
@@ -23,7 +24,7 @@ import numpy as np
 import pandas as pd
 import yaml
 
-from .errors import StoreError, SweepError
+from .errors import StoreError, SweepError, WoundsweepError
 
 __all__ = [
     "DEFAULTS",
@@ -35,6 +36,7 @@ __all__ = [
     "expand",
     "load_run",
     "load_sweep",
+    "parse_stage_range",
     "parse_sweep",
 ]
 
@@ -469,6 +471,14 @@ def expand(sweep: Sweep) -> pd.DataFrame:
     if df["job_id"].duplicated().any():
         raise SweepError(sweep.path, "grid", "duplicate jobs (two axis values give the same job)")
     return df[list(MANIFEST_COLUMNS)]
+
+
+def parse_stage_range(text: str, error: type[WoundsweepError] = WoundsweepError) -> tuple[int, int]:
+    """``"A-B"`` or ``"A"`` with 1 <= A <= B <= 6 -> (A, B); raise ``error`` with one line."""
+    m = re.fullmatch(r"\s*([1-6])\s*(?:-\s*([1-6])\s*)?", str(text))
+    if not m or int(m.group(2) or m.group(1)) < int(m.group(1)):
+        raise error(f"--stages {text!r}: expected A-B with 1 <= A <= B <= 6, e.g. 1-3")
+    return int(m.group(1)), int(m.group(2) or m.group(1))
 
 
 def load_run(run_dir: str | Path) -> Run:

@@ -40,6 +40,7 @@ import pandas as pd
 
 from .errors import WoundsweepError
 from .fsutil import atomic_write_bytes
+from .grid import parse_stage_range
 from .shards import Shard, estimate_cost, partition
 
 __all__ = [
@@ -159,10 +160,8 @@ def parse_mem(text: str) -> str:
 
 def parse_stages(text: str) -> str:
     """``A-B`` or ``A`` with 1 <= A <= B <= 6, normalised to ``A-B``."""
-    m = re.fullmatch(r"\s*([1-6])\s*(?:-\s*([1-6])\s*)?", text)
-    if not m or int(m.group(2) or m.group(1)) < int(m.group(1)):
-        raise SlurmError(f"--stages {text!r}: expected A-B with 1 <= A <= B <= 6, e.g. 1-6")
-    return f"{m.group(1)}-{m.group(2) or m.group(1)}"
+    a, b = parse_stage_range(text, SlurmError)
+    return f"{a}-{b}"
 
 
 def mem_bytes(mem: str) -> int:

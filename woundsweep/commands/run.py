@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 import os
-import re
 from pathlib import Path
 
 import click
 
 from ..errors import StoreError
+from ..grid import parse_stage_range
 from ..runner import RunOptions, RunSummary, run_shard
 from ..shards import parse_shard
 from ..store import FAILURE_CLASSES, FIELDS_CHOICES
@@ -18,10 +18,7 @@ __all__ = ["cmd", "parse_stages"]
 
 def parse_stages(text: str) -> tuple[int, int]:
     """``"A-B"`` or ``"A"`` with 1 <= A <= B <= 6."""
-    m = re.fullmatch(r"\s*([1-6])\s*(?:-\s*([1-6])\s*)?", text)
-    if not m or int(m.group(2) or m.group(1)) < int(m.group(1)):
-        raise StoreError(f"--stages {text!r}: expected A-B with 1 <= A <= B <= 6, e.g. 1-6")
-    return int(m.group(1)), int(m.group(2) or m.group(1))
+    return parse_stage_range(text, StoreError)
 
 
 def _default_workers() -> int:

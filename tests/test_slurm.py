@@ -451,7 +451,18 @@ def _store(rd: Path) -> pd.DataFrame:
     return pd.read_parquet(rd / "results")
 
 
-def _assert_every_job_once(rd: Path, stages: range = range(1, 7)) -> pd.DataFrame:
+def _runner_default_stages() -> range:
+    """The stages `woundsweep run` runs when the scripts pass no --stages."""
+    from woundsweep.commands.run import cmd as run_cmd
+    from woundsweep.grid import parse_stage_range
+
+    (text,) = [p.default for p in run_cmd.params if p.name == "stages_text"]
+    a, b = parse_stage_range(text)
+    return range(a, b + 1)
+
+
+def _assert_every_job_once(rd: Path, stages: range | None = None) -> pd.DataFrame:
+    stages = _runner_default_stages() if stages is None else stages
     man = pd.read_parquet(rd / "manifest.parquet")
     res = _store(rd)
     # One row per job and stage: no (job, stage) twice, and every job of the manifest present.

@@ -23,7 +23,7 @@ test-fast: setup
 test-dolfinx-latest: setup
 	bash scripts/dolfinx-latest.sh $(if $(PYTEST_ARGS),-- $(PYTEST_ARGS))
 
-DEMO_STAGES ?= 1-3
+DEMO_STAGES ?= 1-6
 
 demo: setup
 	$(WS) generate sweeps/demo.yaml --out $(DEMO_DIR)

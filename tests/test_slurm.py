@@ -519,18 +519,6 @@ def test_slurm_chain_on_cluster_with_failing_jobs(
 @pytest.mark.fem
 @pytest.mark.slow
 @pytest.mark.timeout(1800)
-def _solver_stages() -> str:
-    """All six stages once `woundsweep solve` has them; 1-3 while contact is not there yet."""
-    from woundsweep.errors import SolverError
-    from woundsweep.solve import parse_stage_range
-
-    try:
-        parse_stage_range("1-6")
-    except SolverError:
-        return "1-3"
-    return "1-6"
-
-
 def test_demo_sweep_on_cluster(cluster: SlurmCluster, tmp_path: Path) -> None:
     """sweeps/demo.yaml (32 jobs) as an array of 3 shards on the real one-node cluster.
 
@@ -539,7 +527,7 @@ def test_demo_sweep_on_cluster(cluster: SlurmCluster, tmp_path: Path) -> None:
     """
     rd = tmp_path / "run"
     assert ws("generate", str(DEMO), "--out", str(rd)).returncode == 0
-    stages = _solver_stages()
+    stages = "1-6"
     t0 = time.monotonic()
     ids = _submit(rd, cluster, "--shards", "3", "--time", "01:00:00", "--stages", stages)
     _wait(cluster, rd, timeout=1500)

@@ -70,11 +70,10 @@ def test_nodal_p99_max_and_location() -> None:
 def test_parse_stage_range() -> None:
     assert parse_stage_range("1-3") == (1, 3)
     assert parse_stage_range("2") == (2, 2)
+    assert parse_stage_range("4-6") == (4, 6)
     for bad in ("0-2", "3-1", "x", "1-7", "1-2-3"):
         with pytest.raises(SolverError):
             parse_stage_range(bad)
-    with pytest.raises(SolverError, match="not implemented"):
-        parse_stage_range("1-6")
 
 
 def test_stage_result_fields_match_the_design_contract() -> None:
@@ -115,20 +114,26 @@ def test_solve_writes_the_design_output(run_dir: Path, capsys: pytest.CaptureFix
     out = run_dir / "job0.h5"
     assert main(["solve", str(run_dir), "--job", "0", "--out", str(out)]) == 0
     text = capsys.readouterr().out
-    assert "converged" in text and text.count("converged") == 3
+    assert "converged" in text and text.count("converged") == 6
     row = load_run(run_dir).manifest.iloc[0]
     with h5py.File(out, "r") as f:
         assert f.attrs["job_id"] == row["job_id"] and f.attrs["units"] == "mm, kPa, mN, s"
         rows = json.loads(f.attrs["stage_results"])
         n_points, n_cells = len(f["mesh/points"]), len(f["mesh/cells"])
-        for k in (1, 2, 3):
+        for k in range(1, 7):
             assert f[f"stage_{k}/displacement_mm"].shape == (n_points, 3)
             assert f[f"stage_{k}/von_mises_kPa"].shape == (n_cells,)
             assert f[f"stage_{k}/displacement_mm"].dtype == np.float32
         u2 = f["stage_2/displacement_mm"][:]
         pts = f["mesh/points"][:]
-    assert [r["status"] for r in rows] == ["converged"] * 3
+    assert [r["status"] for r in rows] == ["converged"] * 6
     assert all(set(StageResult._fields) <= set(r) for r in rows)
+    # Contact measures exist for the contact stages only.
+    for r in rows:
+        has = [
+            r[k] is not None for k in ("n_penetrating", "max_penetration_mm", "contact_force_mN")
+        ]
+        assert has == [r["stage"] >= 4] * 3
     assert rows[0]["cells"] == n_cells and rows[0]["dofs"] == 3 * n_points
     # The written displacement is in the input point order: zone edges meet at x = w/2.
     w = float(row["wound_width_mm"])
@@ -137,8 +142,8 @@ def test_solve_writes_the_design_output(run_dir: Path, capsys: pytest.CaptureFix
     assert rim.sum() == 2
     np.testing.assert_allclose(pts[rim, 0] + u2[rim, 0], w / 2, atol=1e-5)  # float32 output
     # The store accepts the file.
-    got = read_solver_output(out, str(row["job_id"]), (1, 3))
-    assert sorted(got.stages) == [1, 2, 3]
+    got = read_solver_output(out, str(row["job_id"]), (1, 6))
+    assert sorted(got.stages) == [1, 2, 3, 4, 5, 6]
 
 
 @pytest.mark.fem
@@ -153,15 +158,15 @@ def test_unconverged_stage_exits_3_and_later_stages_are_not_run(tmp_path: Path) 
     with h5py.File(out, "r") as f:
         rows = json.loads(f.attrs["stage_results"])
         groups = set(f.keys())
-    assert [r["status"] for r in rows] == ["max-iterations", "not-run", "not-run"]
+    assert [r["status"] for r in rows] == ["max-iterations"] + ["not-run"] * 5
     assert groups == {"mesh"}  # unconverged states are not written as fields
 
 
 def test_invalid_requests_exit_2(run_dir: Path, capsys: pytest.CaptureFixture) -> None:
     from woundsweep.cli import main
 
-    assert main(["solve", str(run_dir), "--job", "0", "--stages", "1-6"]) == 2
-    assert "not implemented" in capsys.readouterr().err
+    assert main(["solve", str(run_dir), "--job", "0", "--stages", "1-7"]) == 2
+    assert "expected A-B" in capsys.readouterr().err
     assert main(["solve", str(run_dir / "nope"), "--job", "0"]) == 2
 
 
@@ -178,7 +183,7 @@ def test_fault_switch_fires_before_solving(run_dir: Path) -> None:
     cmd = [sys.executable, "-m", "woundsweep", "solve", str(run_dir), "--stages", "1-3"]
     assert subprocess.run([*cmd, "--job", "1"], env=env, capture_output=True).returncode == 7
     # Another job is untouched by a targeted fault (it fails later, on the bad stage range).
-    res = subprocess.run([*cmd[:-1], "1-6", "--job", "2"], env=env, capture_output=True)
+    res = subprocess.run([*cmd[:-1], "1-7", "--job", "2"], env=env, capture_output=True)
     assert res.returncode == 2
 
 

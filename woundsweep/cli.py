@@ -23,13 +23,34 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "woundsweep.commands.generate",
         "Expand a sweep YAML into RUN_DIR/manifest.parquet.",
     ),
-    "mesh": ("woundsweep.commands.mesh", "Build or reuse the tetrahedral meshes of wound geometries; --out FILE.vtu."),
-    "solve": ("woundsweep.commands.solve", "Solve one job through the stages in-process; writes its HDF5 result."),
-    "run": ("woundsweep.commands.run", "Run a shard of the jobs, each in its own process, into RUN_DIR's store."),
-    "status": ("woundsweep.commands.status", "Counts by failure class and stage, throughput, CPU time left."),
-    "analyze": ("woundsweep.commands.analyze", "Stress-quantile model (XGBoost), evaluation, figures, report."),
-    "predict": ("woundsweep.commands.predict", "Predicted stress quantile of one wound from an analyzed run."),
-    "slurm": ("woundsweep.commands.slurm", "SLURM scripts for the sweep: warm-up, job array of shards, follow-up; --submit."),
+    "mesh": (
+        "woundsweep.commands.mesh",
+        "Build or reuse the tetrahedral meshes of wound geometries; --out FILE.vtu.",
+    ),
+    "solve": (
+        "woundsweep.commands.solve",
+        "Solve one job through the stages in-process; writes its HDF5 result.",
+    ),
+    "run": (
+        "woundsweep.commands.run",
+        "Run a shard of the jobs, each in its own process, into RUN_DIR's store.",
+    ),
+    "status": (
+        "woundsweep.commands.status",
+        "Counts by failure class and stage, throughput, CPU time left.",
+    ),
+    "analyze": (
+        "woundsweep.commands.analyze",
+        "Stress-quantile model (XGBoost), evaluation, figures, report.",
+    ),
+    "predict": (
+        "woundsweep.commands.predict",
+        "Predicted stress quantile of one wound from an analyzed run.",
+    ),
+    "slurm": (
+        "woundsweep.commands.slurm",
+        "SLURM scripts for the sweep: warm-up, job array of shards, follow-up; --submit.",
+    ),
 }
 
 

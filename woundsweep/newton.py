@@ -153,6 +153,9 @@ class NewtonSolver:
         self._factored = False
         self._factored_rows = np.zeros(0, dtype=np.int32)
         self.gamma = 1.0
+        # The force scale grows with the full residual norm (reactions included) unless this
+        # is off; then it stays the ``force_scale`` given to `solve`.
+        self.scale_from_residual = True
 
     # -- pieces ---------------------------------------------------------------------------
 
@@ -236,7 +239,8 @@ class NewtonSolver:
                 return result(DIVERGED)
             r_free = np.where(free, r, 0.0)
             res_norm = float(np.linalg.norm(r_free))
-            scale = max(scale, float(np.linalg.norm(r)))
+            if self.scale_from_residual:
+                scale = max(scale, float(np.linalg.norm(r)))
             bc_err = values - u[rows]
             bc_ok = bool(np.max(np.abs(bc_err), initial=0.0) <= st.stol * ell)
             res_ok = res_norm <= st.atol + st.rtol * scale
@@ -346,11 +350,16 @@ def continuation(
     rows: np.ndarray,
     load: Callable[[float], LoadState],
     force_scale: float = 0.0,
+    first_step: float | None = None,
 ) -> ContinuationResult:
-    """Ramp s from 0 to 1, solving at each increment; halve the increment after failures."""
+    """Ramp s from 0 to 1, solving at each increment; halve the increment after failures.
+
+    The first increment is ``first_step`` (default ``1 / settings.load_steps``).
+    """
     st = newton.settings
     u = newton.problem.solution()
-    s, ds = 0.0, 1.0 / max(1, st.load_steps)
+    s = 0.0
+    ds = float(first_step) if first_step is not None else 1.0 / max(1, st.load_steps)
     cuts_in_row = cuts = its = incs = 0
     times = np.zeros(4)
     last: NewtonResult | None = None

@@ -99,22 +99,11 @@ class JobOutcome(NamedTuple):
     jit_time_s: float
 
 
-def parse_stage_range(text: str, implemented: tuple[int, ...] = (1, 2, 3)) -> tuple[int, int]:
-    """``"A-B"`` or ``"A"`` -> (A, B); raises SolverError for bad or unimplemented stages."""
-    parts = str(text).strip().split("-")
-    try:
-        a, b = (int(parts[0]), int(parts[-1])) if len(parts) in (1, 2) else (0, 0)
-    except ValueError:
-        a = b = 0
-    if not (1 <= a <= b <= 6):
-        raise SolverError(f"--stages {text!r}: expected A-B with 1 <= A <= B <= 6, e.g. 1-3")
-    missing = [k for k in range(a, b + 1) if k not in implemented]
-    if missing:
-        raise SolverError(
-            f"--stages {text!r}: stage(s) {missing} not implemented in this version "
-            f"(available: {implemented[0]}-{implemented[-1]})"
-        )
-    return a, b
+def parse_stage_range(text: str) -> tuple[int, int]:
+    """``"A-B"`` or ``"A"`` -> (A, B); raises SolverError for a bad range."""
+    from .grid import parse_stage_range as parse
+
+    return parse(text, SolverError)
 
 
 def _weighted_quantile(values: np.ndarray, weights: np.ndarray, q: float) -> float:
@@ -183,6 +172,11 @@ def run_stages(
             stress_summary(vm, model.volumes, model.cell_nodes, model.midpoints) if ok else {}
         )
         gap = out.diagnostics.get("closure_gap_mm")
+        contact = {
+            key: _finite(out.diagnostics[key])
+            for key in ("n_penetrating", "max_penetration_mm", "contact_force_mN")
+            if key in out.diagnostics
+        }
         result = StageResult(
             stage=k,
             status=s.status,
@@ -194,6 +188,7 @@ def run_stages(
             dofs=dofs,
             cells=cells,
             **stats,
+            **contact,
         )
         extra = {
             "load_increments": int(s.increments),
@@ -202,7 +197,7 @@ def run_stages(
             "assembly_time_s": float(s.assembly_time_s),
             "factor_time_s": float(s.factor_time_s),
         }
-        extra.update({key: v for key, v in out.diagnostics.items() if key != "closure_gap_mm"})
+        extra.update({key: v for key, v in out.diagnostics.items() if key not in result._fields})
         rec = StageRecord(
             result,
             {key: _finite(v) for key, v in extra.items()},
@@ -261,7 +256,7 @@ def write_output(
 def solve_job(
     run_dir: str | Path,
     job_index: int,
-    stages: tuple[int, int] = (1, 3),
+    stages: tuple[int, int] = (1, 6),
     out: str | Path | None = None,
     echo: Callable[[StageRecord], None] | None = None,
     jit: dict[str, Any] | None = None,
@@ -296,6 +291,7 @@ def solve_job(
             zone=ClosureZone.from_sweep(run.sweep.stages),
             settings=NewtonSettings.from_mapping(solver),
             jit=jit,
+            contact_penalty_GPa=tuple(run.sweep.stages.get("contact_penalty_GPa", (1, 5, 100))),
         )
     except ValueError as err:  # the mesh's tags or numbering do not fit the contract
         raise GeometryError(f"job {job_index}: unusable mesh: {err}") from None

@@ -1,5 +1,5 @@
 """The wound model's forms, boundary sets and stages (paper: "Modeling primary intention in six
-stages"). Stages 1-3 are implemented; the plan table is laid out for the contact stages 4-6.
+stages").
 
 Physics (units mm, kPa, mN):
 
@@ -27,6 +27,19 @@ Physics (units mm, kPa, mN):
    stage-2 reaction force of the closure condition on both flanks divided by the deformed
    zone area at the end of stage 2, so the stage-3 closing force equals the stage-2 one while
    its distribution becomes uniform. The remaining gap is reported as ``closure_gap_mm``.
+4-6. Contact (paper: "material depth contact model"): the loads of stage 3 stay, and the
+   penalty contact of the wound flanks (`woundsweep.contact`, two-pass surface-to-surface,
+   pressure k_V * depth / h) is switched on with k_V = 1, 5, 100 GPa (sweep key
+   ``stages.contact_penalty_GPa``). Stage 4 solves the stage-3 loads with contact starting
+   from the stage-2 state, not the stage-3 one: without contact, stage 3's uniform traction
+   can drive the flanks through each other by several elements (demo job 0: 3 h deep), where
+   no penalty method can tell which facets should touch, while the Dirichlet-closed stage-2
+   flanks touch on the mid-plane. The stage ramps the closure from Dirichlet to traction and
+   the penalty geometrically from ``CONTACT_START_kPa`` to k_V together; stages 5 and 6 start
+   from the previous stage and ramp the penalty from its value. The contact term enters the
+   residual and its exact tangent the Jacobian (`FlankContact`). The force scale of the
+   convergence test is the internal force without contact, so large penalty forces of an
+   intermediate state cannot loosen the tolerance.
 
 Every change between stages is ramped (load continuation, `newton.continuation`): Dirichlet
 values move linearly from their current to their target values, and the out-of-balance force
@@ -50,6 +63,7 @@ import ufl
 from petsc4py import PETSc
 
 from . import compat
+from .contact import GPA_TO_KPA, FlankContact, split_wound_flanks
 from .materials import (
     FLYNN_SKIN_TYPES,
     Fung,
@@ -103,7 +117,7 @@ STAGE_NAMES = {
     5: "contact k_V = 5 GPa",
     6: "contact k_V = 100 GPa",
 }
-IMPLEMENTED_STAGES = (1, 2, 3)
+IMPLEMENTED_STAGES = (1, 2, 3, 4, 5, 6)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -206,6 +220,8 @@ class WoundModel:
     the first time on a machine); ``jit_time_s`` records how long that took.
     """
 
+    CONTACT_START_kPa = 100.0  # stage 4's penalty ramp starts here: a soft-tissue modulus
+
     def __init__(
         self,
         mesh_data: Any,
@@ -214,8 +230,12 @@ class WoundModel:
         zone: ClosureZone | None = None,
         settings: NewtonSettings | None = None,
         jit: dict[str, Any] | None = None,
+        contact_penalty_GPa: tuple[float, float, float] = (1.0, 5.0, 100.0),
     ) -> None:
         self.zone_spec = zone or ClosureZone()
+        if len(contact_penalty_GPa) != 3:
+            raise ValueError("contact_penalty_GPa needs three values (stages 4, 5, 6)")
+        self.contact_penalty_kPa = tuple(float(k) * GPA_TO_KPA for k in contact_penalty_GPa)
         self.settings = settings or NewtonSettings()
         pts = np.asarray(mesh_data.points, dtype=float)
         cells = np.asarray(mesh_data.cells, dtype=np.int64)
@@ -241,6 +261,14 @@ class WoundModel:
         self.cell_nodes = compat.cell_dofs(self.V)  # (m, 4) node indices, mesh cell order
         self._prepare_kinematics()
         self._classify(facets, ftags)
+        self.contact: FlankContact | None = None
+        if self.has_wound:
+            left, right = split_wound_flanks(
+                self.X, self.cell_nodes, self.input_node[facets[ftags == WOUND]], self.x_c
+            )
+            # Deeper "penetrations" are not overlaps of facing flanks but the far side of the
+            # wound; the wound's depth bounds any overlap that closure can produce.
+            self.contact = FlankContact(self.X, left, right, max_depth_mm=self.wound_depth)
         self._build_forms(quadrature_degree, jit)
         self.materials: JobMaterials | None = None
         self.homogeneous: dict[int, HomogeneousState] = {}
@@ -392,11 +420,18 @@ class WoundModel:
     def solution(self) -> np.ndarray:
         return self.u.x.array
 
+    def _contact_on(self) -> bool:
+        return self.contact is not None and self.contact.k_V_kPa > 0.0
+
     def residual(self, b: PETSc.Vec) -> None:
         compat.assemble_vector(b, self.R_form)
+        if self._contact_on():
+            self.contact.add_residual(b, self.u.x.array)  # type: ignore[union-attr]
 
     def jacobian(self, A: PETSc.Mat) -> None:
         compat.assemble_matrix(A, self.a_form)
+        if self._contact_on():
+            self.contact.add_jacobian(A, self.u.x.array)  # type: ignore[union-attr]
 
     def min_det(self, u: np.ndarray) -> float:
         G = self._grad(u)
@@ -427,6 +462,8 @@ class WoundModel:
         self.tau.value = 0.0
         self.tau_kPa = 0.0
         self.closure_force_mN = (0.0, 0.0)
+        if self.contact is not None:
+            self.contact.k_V_kPa = 0.0
         self.u.x.array[:] = 0.0
         self.results.clear()
         self.displacements.clear()
@@ -505,15 +542,20 @@ class WoundModel:
         if stage > 1 and stage - 1 not in self.results:
             raise RuntimeError(f"stage {stage} needs stage {stage - 1} first")
         t0 = time.perf_counter()
-        run = {1: self._stage1, 2: self._stage2, 3: self._stage3}[stage]
-        res, diag = run()
+        if stage <= 3:
+            res, diag = {1: self._stage1, 2: self._stage2, 3: self._stage3}[stage]()
+        else:
+            res, diag = self._stage_contact(stage)
         out = StageOutcome(stage, res, time.perf_counter() - t0, diag)
         self.results[stage] = out
         self.displacements[stage] = self.u.x.array.copy()
         return out
 
     def _ramp(
-        self, rows: np.ndarray, target: np.ndarray, offset: np.ndarray | None
+        self,
+        rows: np.ndarray,
+        target: np.ndarray,
+        offset: np.ndarray | None,
     ) -> ContinuationResult:
         u = self.u.x.array
         start = u[rows].copy()
@@ -530,15 +572,20 @@ class WoundModel:
         return continuation(self.newton, rows, load, force_scale=scale)
 
     def _internal_force(self) -> np.ndarray:
-        """Nodal internal forces at the current state (external loads switched off)."""
+        """Nodal internal forces at the current state (external loads and contact switched off)."""
         saved = (self.T_dermis.value.copy(), self.T_subcutis.value.copy(), float(self.tau.value))
+        k_V = self.contact.k_V_kPa if self.contact is not None else 0.0
         self.T_dermis.value[:] = 0.0
         self.T_subcutis.value[:] = 0.0
         self.tau.value = 0.0
+        if self.contact is not None:
+            self.contact.k_V_kPa = 0.0
         r = self._residual_array()
         self.T_dermis.value[:] = saved[0]
         self.T_subcutis.value[:] = saved[1]
         self.tau.value = saved[2]
+        if self.contact is not None:
+            self.contact.k_V_kPa = k_V
         return r
 
     def _stage1(self) -> tuple[ContinuationResult, dict[str, float]]:
@@ -605,6 +652,66 @@ class WoundModel:
             "closure_traction_kPa": self.tau_kPa,
             "pin_reaction_max_mN": float(np.max(np.abs(r[self._pin_rows()]))),
         }
+        return res, diag
+
+    def _stage_contact(self, stage: int) -> tuple[ContinuationResult, dict[str, float]]:
+        """Stages 4-6: the stage-3 loads plus flank contact at this stage's penalty.
+
+        The penalty is ramped geometrically from the previous stage's (stage 4: from
+        ``CONTACT_START_kPa``) to this stage's value, so an overlap left by stage 3 is pushed
+        out gradually instead of by a force of order k_V at once.
+        """
+        rows = self._gauge_rows()
+        u = self.u.x.array
+        diag: dict[str, float] = {}
+        c = self.contact
+        k_to = self.contact_penalty_kPa[stage - 4]
+        if c is None:  # no wound: nothing can touch; the stage re-solves the stage-3 loads
+            return self._ramp(rows, u[rows].copy(), self._residual_array()), {}
+        k_from = self.CONTACT_START_kPa if stage == 4 else self.contact_penalty_kPa[stage - 5]
+        k_from = min(k_from, k_to)
+        if stage == 4:
+            u[:] = self.displacements[2]
+        c.reset_timers()
+        c.k_V_kPa = 0.0
+        offset = self._residual_array()
+        offset[rows] = 0.0
+        values = u[rows].copy()
+        scale = float(np.linalg.norm(self._internal_force()))
+
+        def load(s: float) -> LoadState:
+            c.k_V_kPa = k_from ** (1.0 - s) * k_to**s
+            return LoadState(values, (1.0 - s) * offset)
+
+        # The residual of a penetrating start holds penalty forces far above the physical
+        # ones; they must not set the convergence tolerance.
+        self.newton.scale_from_residual = False
+        try:
+            decades = np.log10(k_to / k_from)
+            res = continuation(
+                self.newton, rows, load, scale, first_step=min(1.0, 0.5 / max(decades, 1e-9))
+            )
+        finally:
+            self.newton.scale_from_residual = True
+            c.k_V_kPa = k_to
+        r = self._residual_array()
+        diag["closure_gap_mm"] = self.closure_gap()
+        diag["pin_reaction_max_mN"] = float(np.max(np.abs(r[self._pin_rows()])))
+        diag["contact_penalty_kPa"] = c.k_V_kPa
+        detect, assemble, searches = c.detect_time_s, c.assembly_time_s, c.searches
+        summ = c.summary(u)
+        diag.update(
+            {
+                "n_penetrating": summ.n_penetrating,
+                "max_penetration_mm": summ.max_penetration_mm,
+                "max_penetration_rel": summ.max_penetration_rel,
+                "contact_force_mN": summ.contact_force_mN,
+                "contact_deep_points": summ.n_deep,
+                "contact_detect_time_s": detect,
+                "contact_assembly_time_s": assemble,
+                "contact_searches": searches,
+            }
+        )
         return res, diag
 
     def _lateral_force(self) -> float:

@@ -80,9 +80,9 @@ def _summary_line(s: RunSummary, run_dir: Path) -> str:
 @click.option(
     "--stages",
     "stages_text",
-    default="1-3",
+    default="1-6",
     show_default=True,
-    help="Stages A-B (4-6, the contact stages, are not implemented yet).",
+    help="Stages A-B (1-3: tension and closure, 4-6: contact).",
 )
 @click.option(
     "--fields",

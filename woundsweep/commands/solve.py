@@ -1,4 +1,4 @@
-"""``woundsweep solve RUN_DIR --job N [--stages 1-3] [--out FILE.h5]``: one job, in-process.
+"""``woundsweep solve RUN_DIR --job N [--stages 1-6] [--out FILE.h5]``: one job, in-process.
 
 Exit status (docs/design.md): 0 every requested stage converged; 3 a stage did not converge
 (the file is still written; later stages are ``not-run``); 2 invalid input; 4 mesh failed.
@@ -37,7 +37,7 @@ def _row(rec: object) -> str:
 @click.command("solve")
 @click.argument("run_dir", type=click.Path(file_okay=False, path_type=Path))
 @click.option("--job", "job_index", type=int, required=True, help="Manifest job_index.")
-@click.option("--stages", "stages_text", default="1-3", show_default=True, help="Stages A-B.")
+@click.option("--stages", "stages_text", default="1-6", show_default=True, help="Stages A-B.")
 @click.option(
     "--out",
     type=click.Path(dir_okay=False, path_type=Path),

@@ -1,0 +1,584 @@
+"""Penalty contact of the two wound flanks (stages 4-6; paper: "material depth contact model").
+
+Formulation: two-pass surface-to-surface penalty at contact points, in the DEFORMED
+configuration. Units: lengths mm, k_V kPa (1 GPa = 1e6 kPa), forces mN, energy mN mm.
+
+- Surfaces. The wound surface (facet tag WOUND) is split into two flanks by the reference
+  facet centroid, x < x_c (left) and x >= x_c (right), x_c the wound's mirror plane. Each
+  facet is oriented so that its normal points out of the body (into the wound cavity). Any two
+  facet sets can be given (the tests use two blocks).
+- Contact points. Each facet of one flank (the slave in that pass) carries six points: the
+  symmetric 3-point rule (barycentric (2/3, 1/6, 1/6), 1/4 of the facet area each) and three
+  points near the vertices ((1 - 2a, a, a), a = 1/50, 1/12 of the area each), so no corner of
+  a flank can cross the other flank unseen. Point q has the reference area A_q it carries and
+  the size h_q of its facet (side of the equilateral triangle of the facet's reference area).
+- Gap. For a point at deformed position x_q and a facet (x_1, x_2, x_3) of the other (master)
+  flank, g = (x_q - x_1) . n with n = (x_2 - x_1) x (x_3 - x_1) / |...| the deformed unit
+  normal; g < 0 means that the point is behind the master surface: -g is its depth in the
+  master body, measured normal to the master surface (the "material depth").
+- Pairing, searched afresh at every new state (the residual is a function of u alone):
+  the master facet of a point is the closest one (exact point-triangle distance) among the
+  ``neighbours`` facets with the nearest deformed centroids (scipy cKDTree; facets sharing a
+  node with the point's own facet are skipped). The point is engaged when g < touch_rel * h_q
+  (touching counts; ``touch_rel`` = 1e-9), the orthogonal projection of x_q lies inside the
+  facet (barycentric coordinates >= -bary_tol; 0.05 keeps a point paired where it slides
+  over the edge between two facets whose planes differ and its projection misses both: at
+  45 degrees the flanks slide along each other, and with 1e-3 such points dropped in and out
+  of contact and Newton cycled), the flanks face each other there
+  (n_q . n <= normal_cos, n_q the deformed normal of the slave facet: this keeps the two
+  flanks of a smooth wound bottom, which are continuous and coplanar there, from being taken
+  for penetration), and the depth -g <= max_depth_mm (deeper points are counted as
+  ``n_deep`` and carry no force; the wound model uses the wound depth).
+- Energy. Pi_c = sum over engaged points of (w / 2) (k_V / h_q) A_q g^2 with w = 1/2 because
+  each flank is slave once and master once (two-pass): when both passes see the same
+  overlap, each carries half the load. The contact pressure per reference area is therefore
+  p = k_V (-g) / h_q: k_V has stress units, like the paper's "material depth" penalty (a
+  layer of thickness h with modulus k_V), and the penetration at pressure p is
+  -g = p h / k_V, relative to the element size p / k_V (1e-4 at p = 100 kPa, k_V = 1 GPa).
+  The point stiffness c = w k_V A_q / h_q is in mN/mm, the normal force c (-g) in mN.
+- Linearisation. Residual c g dg/dq and tangent c (dg/dq dg/dq^T + g d2g/dq2) over the
+  coordinates of the slave facet's and the master facet's nodes, both exact (analytic,
+  `gap_derivatives`) for the current pairing; ``exact_depth_rel`` can drop the geometric term
+  g d2g/dq2 where |g| > exact_depth_rel h (a quasi-Newton option, off by default). The pairing
+  itself is piecewise constant in u: Newton sees the exact derivative wherever it is defined,
+  and a change of pairing between steps is an ordinary non-smooth event of a penalty method,
+  absorbed by the relaxation and the load continuation of `woundsweep.newton`.
+- Assembly. Residual contributions are summed into the flat dof vector with ``np.bincount``;
+  tangent blocks go to the PETSc matrix as one CSR batch (``Mat.setValuesCSR``, ADD_VALUES).
+  Couplings across the wound are not in the finite-element sparsity pattern: the matrix may
+  grow (``NEW_NONZERO_ALLOCATION_ERR`` off) and MUMPS redoes its symbolic analysis when the
+  pattern changes (PETSc tracks the nonzero state).
+
+All evaluation is vectorised over contact points (no Python loop over points or cells); the
+last pairing is cached by the flank node positions, so a Jacobian at the state of the last
+residual costs no second search. Dof layout: node i has dofs 3 i, 3 i + 1, 3 i + 2 (blocked P1).
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any, NamedTuple
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+__all__ = [
+    "GPA_TO_KPA",
+    "ContactPairs",
+    "ContactSummary",
+    "FlankContact",
+    "Surface",
+    "gap_derivatives",
+    "orient_outward",
+    "point_triangle_distance",
+    "split_wound_flanks",
+]
+
+GPA_TO_KPA = 1.0e6  # stiffness in GPa -> kPa
+TWO_PASS_WEIGHT = 0.5  # each flank is slave once and master once
+
+
+class Surface(NamedTuple):
+    """One contact surface in node numbering (reference configuration)."""
+
+    facets: np.ndarray  # (nf, 3) node indices, normal (right-hand rule) points out of the body
+    nodes: np.ndarray  # (ns,) the facets' nodes, sorted
+    area_mm2: np.ndarray  # (ns,) tributary reference area of each node
+    size_mm: np.ndarray  # (ns,) local element size h_s of each node
+
+
+class ContactPairs(NamedTuple):
+    """Active contact points of both passes at one state."""
+
+    slave: np.ndarray  # (na, 3) nodes of the slave facet that holds the point
+    bary: np.ndarray  # (na, 3) the point's shape function values on that facet
+    master: np.ndarray  # (na, 3) master facet nodes
+    gap_mm: np.ndarray  # (na,) signed gap: < 0 penetrating, tiny >= 0 touching (no force)
+    stiffness: np.ndarray  # (na,) c = w k_V A_q / h, mN/mm
+    size_mm: np.ndarray  # (na,) h of the slave facet
+    n_deep: int  # points left out because -g > max_depth_mm (0 when all is well)
+
+
+class ContactSummary(NamedTuple):
+    """Scalars of a contact state (the StageResult contact fields plus diagnostics)."""
+
+    n_penetrating: int  # contact points with g < 0
+    max_penetration_mm: float  # max -g (0 if none)
+    max_penetration_rel: float  # max -g / h_s
+    contact_force_mN: float  # total normal contact force, sum of c (-g)
+    n_deep: int
+
+
+def _cross_matrix(v: np.ndarray) -> np.ndarray:
+    """(..., 3, 3) matrices [v]x with [v]x w = v x w."""
+    z = np.zeros(v.shape[:-1])
+    return np.stack(
+        [
+            np.stack([z, -v[..., 2], v[..., 1]], axis=-1),
+            np.stack([v[..., 2], z, -v[..., 0]], axis=-1),
+            np.stack([-v[..., 1], v[..., 0], z], axis=-1),
+        ],
+        axis=-2,
+    )
+
+
+def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    return np.einsum("...i,...i->...", a, b)
+
+
+def gap_derivatives(
+    xs: np.ndarray, x1: np.ndarray, x2: np.ndarray, x3: np.ndarray, hessian: bool = True
+) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """Signed gap g = (xs - x1) . n and its exact first and second derivatives.
+
+    Inputs (N, 3). Returns g (N,), dg/dq (N, 12) and d2g/dq2 (N, 12, 12) (or None) with
+    q = (xs, x1, x2, x3). With d = xs - x1, a = x2 - x1, b = x3 - x1, m = a x b, mu = |m|,
+    n = m / mu, c = (d - g n) / mu:  dg/dd = n, dg/da = b x c, dg/db = c x a;
+    d2g/dd dm = (I - n n^T) / mu, d2g/dm2 = (3 g n n^T - g I - d n^T - n d^T) / mu^2, and
+    the bilinear m(a, b) adds 2 c . (da x db).
+    """
+    d, a, b = xs - x1, x2 - x1, x3 - x1
+    m = np.cross(a, b)
+    mu = np.linalg.norm(m, axis=1)
+    n = m / mu[:, None]
+    g = _dot(d, n)
+    c = (d - g[:, None] * n) / mu[:, None]
+    ga, gb = np.cross(b, c), np.cross(c, a)
+    grad = np.concatenate([n, -n - ga - gb, ga, gb], axis=1)
+    if not hessian:
+        return g, grad, None
+    N = len(g)
+    eye = np.broadcast_to(np.eye(3), (N, 3, 3))
+    nn = n[:, :, None] * n[:, None, :]
+    Mm = np.concatenate([-_cross_matrix(b), _cross_matrix(a)], axis=2)  # dm / d(a, b): (N,3,6)
+    P = (eye - nn) / mu[:, None, None]
+    g2 = g[:, None, None]
+    gmm = 3.0 * g2 * nn - g2 * eye - d[:, :, None] * n[:, None, :] - n[:, :, None] * d[:, None, :]
+    gmm /= (mu**2)[:, None, None]
+    H9 = np.zeros((N, 9, 9))
+    Hdab = P @ Mm  # (N, 3, 6)
+    H9[:, 0:3, 3:9] = Hdab
+    H9[:, 3:9, 0:3] = np.transpose(Hdab, (0, 2, 1))
+    Hab = np.transpose(Mm, (0, 2, 1)) @ gmm @ Mm
+    C = _cross_matrix(c)
+    Hab[:, 0:3, 3:6] -= C
+    Hab[:, 3:6, 0:3] += C
+    H9[:, 3:9, 3:9] = Hab
+    # (d, a, b) = T q with q = (xs, x1, x2, x3): d = xs - x1, a = x2 - x1, b = x3 - x1.
+    T = np.zeros((9, 12))
+    for k, (col_pos, col_neg) in enumerate(((0, 3), (6, 3), (9, 3))):
+        T[3 * k : 3 * k + 3, col_pos : col_pos + 3] = np.eye(3)
+        T[3 * k : 3 * k + 3, col_neg : col_neg + 3] -= np.eye(3)
+    H = np.einsum("ai,nab,bj->nij", T, H9, T)
+    return g, grad, H
+
+
+def point_triangle_distance(
+    p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Exact distance from points to triangles (broadcast over leading axes).
+
+    Returns (distance, signed plane distance g = (p - a) . n, smallest barycentric coordinate
+    of the orthogonal projection onto the triangle's plane; >= 0 means inside).
+    """
+    e0, e1, v = b - a, c - a, p - a
+    nrm = np.cross(e0, e1)
+    nrm = nrm / np.linalg.norm(nrm, axis=-1, keepdims=True)
+    g = _dot(v, nrm)
+    d00, d01, d11 = _dot(e0, e0), _dot(e0, e1), _dot(e1, e1)
+    d20, d21 = _dot(v, e0), _dot(v, e1)
+    den = d00 * d11 - d01 * d01
+    beta = (d11 * d20 - d01 * d21) / den
+    gamma = (d00 * d21 - d01 * d20) / den
+    bary_min = np.minimum(np.minimum(beta, gamma), 1.0 - beta - gamma)
+
+    def seg(q0: np.ndarray, q1: np.ndarray) -> np.ndarray:
+        e = q1 - q0
+        t = np.clip(_dot(p - q0, e) / _dot(e, e), 0.0, 1.0)
+        return np.linalg.norm(p - q0 - t[..., None] * e, axis=-1)
+
+    edge = np.minimum(np.minimum(seg(a, b), seg(b, c)), seg(c, a))
+    dist = np.where(bary_min >= 0.0, np.abs(g), edge)
+    return dist, g, bary_min
+
+
+def _face_keys(tri: np.ndarray, n: int) -> np.ndarray:
+    t = np.sort(np.asarray(tri, dtype=np.int64), axis=1)
+    return (t[:, 0] * n + t[:, 1]) * n + t[:, 2]
+
+
+def orient_outward(X: np.ndarray, cells: np.ndarray, facets: np.ndarray) -> np.ndarray:
+    """Boundary facets (node indices) reordered so that their normal points out of the body.
+
+    ``X`` (n, 3) node coordinates, ``cells`` (m, 4) tetrahedra in the same node numbering.
+    """
+    cells = np.asarray(cells, dtype=np.int64)
+    facets = np.asarray(facets, dtype=np.int64).reshape(-1, 3)
+    n = len(X)
+    opposite = [(1, 2, 3, 0), (0, 2, 3, 1), (0, 1, 3, 2), (0, 1, 2, 3)]
+    faces = np.concatenate([cells[:, list(o[:3])] for o in opposite])
+    apex = np.concatenate([cells[:, o[3]] for o in opposite])
+    keys = _face_keys(faces, n)
+    order = np.argsort(keys)
+    want = _face_keys(facets, n)
+    pos = np.minimum(np.searchsorted(keys, want, sorter=order), len(order) - 1)
+    if not np.all(keys[order[pos]] == want):
+        raise ValueError("a contact facet is not a face of any cell")
+    inner = X[apex[order[pos]]]
+    p = X[facets]
+    nrm = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    flip = _dot(nrm, inner - p[:, 0]) > 0.0  # normal points toward the cell: flip it
+    out = facets.copy()
+    out[flip, 1], out[flip, 2] = facets[flip, 2], facets[flip, 1]
+    return out
+
+
+def _surface(X: np.ndarray, facets: np.ndarray) -> Surface:
+    p = X[facets]
+    area = 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
+    nodes, inv = np.unique(facets.ravel(), return_inverse=True)
+    tri_area = np.bincount(inv, weights=np.repeat(area, 3), minlength=len(nodes))
+    count = np.bincount(inv, minlength=len(nodes))
+    mean_area = tri_area / count
+    size = np.sqrt(4.0 * mean_area / np.sqrt(3.0))  # side of the equilateral triangle
+    return Surface(facets, nodes, tri_area / 3.0, size)
+
+
+def split_wound_flanks(
+    X: np.ndarray, cells: np.ndarray, wound_facets: np.ndarray, x_c: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """The wound facets (node indices) split into (left, right) flanks by reference centroid
+    x < x_c, each oriented outward (`orient_outward`)."""
+    wound_facets = orient_outward(X, cells, wound_facets)
+    left = X[wound_facets].mean(axis=1)[:, 0] < x_c
+    return wound_facets[left], wound_facets[~left]
+
+
+# Contact points per slave facet (barycentric coordinates, share of the facet's area): the
+# symmetric 3-point rule (2/3, 1/6, 1/6) carries 3/4 of the area, and three points close to
+# the vertices (1 - 2 a, a, a) with a = 1/50 carry 1/12 each, so that no corner of a flank can
+# cross the other flank unseen (with the 3-point rule alone the top corners of a closed wound
+# crossed by 6% of an element). The points stay inside the facet: no point sits on a vertex or
+# an edge, where the master facet of a mirror-image mesh would be ambiguous.
+_A = 1.0 / 50.0
+RULE_BARY = np.concatenate(
+    [
+        np.array([[4.0, 1.0, 1.0], [1.0, 4.0, 1.0], [1.0, 1.0, 4.0]]) / 6.0,
+        np.array([[1 - 2 * _A, _A, _A], [_A, 1 - 2 * _A, _A], [_A, _A, 1 - 2 * _A]]),
+    ]
+)
+RULE_WEIGHT = np.array([0.25, 0.25, 0.25, 1.0 / 12.0, 1.0 / 12.0, 1.0 / 12.0])
+
+
+class _Points(NamedTuple):
+    """Contact points of one slave surface (``len(RULE_WEIGHT)`` per facet)."""
+
+    carrier: np.ndarray  # (nq, 3) nodes of the slave facet that holds the point
+    bary: np.ndarray  # (nq, 3) the point's shape function values on that facet
+    area_mm2: np.ndarray  # (nq,) reference area carried by the point
+    size_mm: np.ndarray  # (nq,) h of the facet
+    facet: np.ndarray  # (nq,) slave facet index
+
+
+def _contact_points(X: np.ndarray, facets: np.ndarray) -> _Points:
+    p = X[facets]
+    area = 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
+    size = np.sqrt(4.0 * area / np.sqrt(3.0))  # side of the equilateral triangle of that area
+    nq = len(RULE_WEIGHT)
+    facet = np.repeat(np.arange(len(facets)), nq)
+    return _Points(
+        facets[facet],
+        np.tile(RULE_BARY, (len(facets), 1)),
+        (area[:, None] * RULE_WEIGHT).ravel(),
+        size[facet],
+        facet,
+    )
+
+
+class _Closest(NamedTuple):
+    facet: np.ndarray  # (N,) master facet index (valid where ok)
+    gap: np.ndarray  # (N,) signed plane distance to it
+    ok: np.ndarray  # (N,) projection inside, not excluded, flanks facing each other
+
+
+class _Candidates(NamedTuple):
+    """Contact candidates of both passes found by one search."""
+
+    carrier: np.ndarray  # (nc, 3) slave facet nodes
+    bary: np.ndarray  # (nc, 3)
+    master: np.ndarray  # (nc, 3) master facet nodes
+    area_mm2: np.ndarray  # (nc,)
+    size_mm: np.ndarray  # (nc,)
+    engaged: np.ndarray  # (nc,) bool: engaged (g < touch_rel h)
+    n_deep: int
+
+
+class FlankContact:
+    """Two-pass surface-to-surface penalty between two surfaces (see the module docstring).
+
+    ``X`` (n, 3) reference node coordinates; ``left`` and ``right`` (k, 3) outward-oriented
+    facets in node numbering. ``k_V_kPa`` (attribute) is the penalty; 0 switches contact off
+    (pairs and penetrations are still measured).
+    """
+
+    def __init__(
+        self,
+        X: np.ndarray,
+        left: np.ndarray,
+        right: np.ndarray,
+        *,
+        max_depth_mm: float,
+        neighbours: int = 12,
+        bary_tol: float = 0.05,
+        normal_cos: float = 0.0,
+        touch_rel: float = 1e-9,
+        exact_depth_rel: float = np.inf,
+        near_rel: float = 1.0,
+    ) -> None:
+        self.X = np.asarray(X, dtype=float)
+        self.n_dofs = 3 * len(self.X)
+        a, b = _surface(self.X, np.asarray(left)), _surface(self.X, np.asarray(right))
+        self.surfaces = (a, b)
+        self.points = (_contact_points(self.X, a.facets), _contact_points(self.X, b.facets))
+        self.nodes = np.union1d(a.nodes, b.nodes)  # every node whose position matters
+        self.max_depth_mm = float(max_depth_mm)
+        self.neighbours = int(neighbours)
+        self.bary_tol = float(bary_tol)
+        self.normal_cos = float(normal_cos)
+        self.touch_rel = float(touch_rel)
+        self.exact_depth_rel = float(exact_depth_rel)
+        self.k_V_kPa = 0.0
+        self.near_rel = float(near_rel)
+        self._found: _Candidates | None = None
+        self._cand: tuple[np.ndarray, np.ndarray, np.ndarray] = (np.zeros(0),) * 3
+        self._version = 0
+        self._cache_x: np.ndarray | None = None
+        self._cache_key: tuple[float, int] = (-1.0, -1)
+        self._cache: ContactPairs | None = None
+        self.reset_timers()
+
+    # -- geometry at a state -------------------------------------------------------------------
+
+    def positions(self, u: np.ndarray) -> np.ndarray:
+        """Deformed coordinates (n, 3) of all nodes for flat displacement dofs ``u``."""
+        return self.X + np.asarray(u).reshape(-1, 3)
+
+    def _closest(
+        self,
+        x: np.ndarray,
+        pts: np.ndarray,
+        normals: np.ndarray,
+        exclude: np.ndarray,
+        master: Surface,
+    ) -> _Closest:
+        """Master facet of each point: nearest (exact distance) among the ``neighbours`` facets
+        with the nearest centroids, skipping facets that share a node with ``exclude`` (N, j)."""
+        tri = master.facets
+        k = min(self.neighbours, len(tri))
+        _, cand = cKDTree(x[tri].mean(axis=1)).query(pts, k=k)
+        cand = np.asarray(cand).reshape(len(pts), k)
+        ct = tri[cand]  # (N, k, 3)
+        v = x[ct]
+        dist, g, bmin = point_triangle_distance(
+            pts[:, None, :], v[..., 0, :], v[..., 1, :], v[..., 2, :]
+        )
+        own = np.any(ct[:, :, :, None] == exclude[:, None, None, :], axis=(2, 3))
+        inside = bmin >= -self.bary_tol
+        # Ties on shared edges go to a facet that the projection falls into.
+        score = np.where(own, np.inf, dist + np.where(inside, 0.0, 1e-12 * (1.0 + dist)))
+        best = np.argmin(score, axis=1)
+        r = np.arange(len(pts))
+        facet = cand[r, best]
+        pm = x[tri[facet]]
+        n_m = np.cross(pm[:, 1] - pm[:, 0], pm[:, 2] - pm[:, 0])
+        n_m /= np.linalg.norm(n_m, axis=1, keepdims=True)
+        facing = _dot(normals, n_m) <= self.normal_cos
+        ok = inside[r, best] & ~own[r, best] & facing
+        return _Closest(facet, g[r, best], ok)
+
+    def _detect_one(self, x: np.ndarray, side: int) -> _Candidates:
+        """Candidate points of one pass: a valid master facet and g < near_rel h (in front
+        but close, touching, or penetrating up to max_depth_mm)."""
+        sl, ms, qp = self.surfaces[side], self.surfaces[1 - side], self.points[side]
+        sf = qp.carrier
+        pts = np.einsum("qi,qij->qj", qp.bary, x[sf])
+        p = x[sl.facets]
+        normals = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])[qp.facet]
+        normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+        cl = self._closest(x, pts, normals, sf, ms)
+        cand = cl.ok & (cl.gap < self.near_rel * qp.size_mm)
+        deep = cand & (-cl.gap > self.max_depth_mm)
+        keep = cand & ~deep
+        engaged = cl.gap[keep] < self.touch_rel * qp.size_mm[keep]
+        return _Candidates(
+            sf[keep], qp.bary[keep], ms.facets[cl.facet[keep]], qp.area_mm2[keep],
+            qp.size_mm[keep], engaged, int(deep.sum()),
+        )  # fmt: skip
+
+    def _search(self, u: np.ndarray) -> None:
+        """Find the contact candidates of both passes at ``u``."""
+        t0 = time.perf_counter()
+        x = self.positions(u)
+        parts = [self._detect_one(x, side) for side in (0, 1)]
+        self._found = _Candidates(*(np.concatenate([p[i] for p in parts]) for i in range(6)),
+                                  sum(p[6] for p in parts))  # fmt: skip
+        self._version += 1
+        self.detect_time_s += time.perf_counter() - t0
+        self.searches += 1
+
+    def pairs(self, u: np.ndarray) -> ContactPairs:
+        """Engaged contact points at displacement ``u``; cached by the flank node positions."""
+        x = self.positions(u)
+        xn = x[self.nodes]
+        key = (self.k_V_kPa, self._version)
+        if self._cache is not None and self._cache_key == key and np.array_equal(xn, self._cache_x):
+            return self._cache
+        self._search(u)
+        key = (self.k_V_kPa, self._version)
+        fr = self._found
+        assert fr is not None
+        t0 = time.perf_counter()
+        xq = np.einsum("qi,qij->qj", fr.bary, x[fr.carrier])
+        pm = x[fr.master]
+        nrm = np.cross(pm[:, 1] - pm[:, 0], pm[:, 2] - pm[:, 0])
+        g = _dot(xq - pm[:, 0], nrm) / np.linalg.norm(nrm, axis=1)
+        self._cand = (g, fr.size_mm, TWO_PASS_WEIGHT * self.k_V_kPa * fr.area_mm2 / fr.size_mm)
+        act = fr.engaged
+        stiff = self._cand[2][act]
+        out = ContactPairs(
+            fr.carrier[act], fr.bary[act], fr.master[act], g[act], stiff, fr.size_mm[act],
+            fr.n_deep,
+        )  # fmt: skip
+        self._cache, self._cache_x, self._cache_key = out, xn.copy(), key
+        self.evaluations += 1
+        self.assembly_time_s += time.perf_counter() - t0
+        return out
+
+    # -- energy, forces, tangent ------------------------------------------------------------------
+
+    def _local(
+        self, u: np.ndarray, hessian: bool
+    ) -> tuple[ContactPairs, np.ndarray, np.ndarray, np.ndarray | None]:
+        """Pairs, their 18 dofs (3 slave + 3 master nodes), gradient and Hessian of the gap."""
+        pr = self.pairs(u)
+        x = self.positions(u)
+        nodes = np.concatenate([pr.slave, pr.master], axis=1)  # (na, 6)
+        dofs = (3 * nodes[:, :, None] + np.arange(3)).reshape(-1, 18)
+        na = len(pr.gap_mm)
+        if na == 0:
+            return pr, dofs, np.zeros((0, 18)), np.zeros((0, 18, 18)) if hessian else None
+        xq = np.einsum("qi,qij->qj", pr.bary, x[pr.slave])
+        _, g12, H12 = gap_derivatives(
+            xq, x[pr.master[:, 0]], x[pr.master[:, 1]], x[pr.master[:, 2]], hessian
+        )
+        # x_q = sum_i N_i x_si: d/d(slave node i) = N_i d/dx_q (g is linear in x_q: no qq term).
+        slave_part = (pr.bary[:, :, None] * g12[:, None, 0:3]).reshape(na, 9)
+        grad = np.concatenate([slave_part, g12[:, 3:12]], axis=1)
+        if not hessian:
+            return pr, dofs, grad, None
+        assert H12 is not None
+        H = np.zeros((na, 18, 18))
+        Hqm = H12[:, 0:3, 3:12]  # (na, 3, 9)
+        sm = pr.bary[:, :, None, None] * Hqm[:, None, :, :]  # (na, 3 slave nodes, 3, 9)
+        sm = sm.reshape(na, 9, 9)
+        H[:, 0:9, 9:18] = sm
+        H[:, 9:18, 0:9] = np.transpose(sm, (0, 2, 1))
+        H[:, 9:18, 9:18] = H12[:, 3:12, 3:12]
+        return pr, dofs, grad, H
+
+    def energy(self, u: np.ndarray) -> float:
+        """Penalty energy (mN mm) at ``u``."""
+        pr = self.pairs(u)
+        return float(0.5 * np.sum(pr.stiffness * pr.gap_mm**2))
+
+    def force_vector(self, u: np.ndarray) -> np.ndarray:
+        """Contact contribution to the residual, dPi_c/du (flat, mN)."""
+        pr, dofs, grad, _ = self._local(u, hessian=False)
+        t0 = time.perf_counter()
+        w = (pr.stiffness * pr.gap_mm)[:, None] * grad
+        out = np.bincount(dofs.ravel(), weights=w.ravel(), minlength=self.n_dofs)
+        self.assembly_time_s += time.perf_counter() - t0
+        return out
+
+    def tangent_coo(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Contact tangent d2Pi_c/du2 as COO triplets (rows, cols, values; duplicates add)."""
+        pr, dofs, grad, H = self._local(u, hessian=True)
+        t0 = time.perf_counter()
+        assert H is not None
+        c = pr.stiffness[:, None, None]
+        # The geometric term, unless dropped beyond exact_depth_rel (module docstring).
+        g = pr.gap_mm
+        g = np.where(np.abs(g) <= self.exact_depth_rel * pr.size_mm, g, 0.0)[:, None, None]
+        K = c * (grad[:, :, None] * grad[:, None, :] + g * H)
+        rows = np.repeat(dofs, 18, axis=1).ravel()
+        cols = np.tile(dofs, (1, 18)).ravel()
+        self.assembly_time_s += time.perf_counter() - t0
+        return rows, cols, K.ravel()
+
+    def tangent_csr(self, u: np.ndarray) -> Any:
+        """Contact tangent as a scipy CSR matrix (n_dofs square)."""
+        import scipy.sparse
+
+        rows, cols, vals = self.tangent_coo(u)
+        t0 = time.perf_counter()
+        K = scipy.sparse.coo_matrix((vals, (rows, cols)), shape=(self.n_dofs, self.n_dofs)).tocsr()
+        K.sum_duplicates()
+        self.assembly_time_s += time.perf_counter() - t0
+        return K
+
+    def add_residual(self, b: Any, u: np.ndarray) -> None:
+        """Add the contact forces to an assembled PETSc residual vector ``b`` (serial)."""
+        if self.k_V_kPa <= 0.0:
+            return
+        f = self.force_vector(u)
+        arr = b.getArray()
+        arr += f[: len(arr)]
+
+    def add_jacobian(self, A: Any, u: np.ndarray) -> None:
+        """Add the contact tangent to an assembled PETSc matrix ``A`` and re-finalise it.
+
+        New couplings grow the sparsity pattern (allocation errors are switched off for ``A``).
+        """
+        if self.k_V_kPa <= 0.0:
+            return
+        from petsc4py import PETSc
+
+        K = self.tangent_csr(u)
+        if K.nnz == 0:
+            return
+        t0 = time.perf_counter()
+        A.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
+        A.setValuesCSR(
+            K.indptr.astype(PETSc.IntType),
+            K.indices.astype(PETSc.IntType),
+            K.data.astype(PETSc.ScalarType),
+            addv=PETSc.InsertMode.ADD_VALUES,
+        )
+        A.assemble()
+        self.assembly_time_s += time.perf_counter() - t0
+
+    # -- reporting ------------------------------------------------------------------------------
+
+    def summary(self, u: np.ndarray) -> ContactSummary:
+        """Penetration and compressive normal force of the state ``u`` at the current
+        ``k_V_kPa``, over all contact candidates at ``u``."""
+        pr = self.pairs(u)
+        g, size, stiff = self._cand
+        depth = np.maximum(-g, 0.0)
+        pen = depth > 0.0
+        if not pen.any():
+            return ContactSummary(0, 0.0, 0.0, 0.0, pr.n_deep)
+        return ContactSummary(
+            int(pen.sum()),
+            float(depth.max()),
+            float(np.max(depth / size)),
+            float(np.sum(stiff * depth)),
+            pr.n_deep,
+        )
+
+    def reset_timers(self) -> None:
+        """Zero the counters: search time, assembly time, evaluations, searches."""
+        self.detect_time_s = 0.0  # cumulative: candidate searches
+        self.assembly_time_s = 0.0  # cumulative: gaps, residual and tangent contributions
+        self.evaluations = 0
+        self.searches = 0

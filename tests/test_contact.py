@@ -283,6 +283,12 @@ def assert_same_pairing(contact: FlankContact, ref, u: np.ndarray) -> None:
     np.testing.assert_array_equal(ref.bary, b.bary)
 
 
+# Finite-difference checks need a pairing that a small perturbation cannot change: with the
+# default bary_tol (0.05) a point near a shared edge of two non-coplanar master facets is
+# inside both, and the closer one can switch under the perturbation.
+STRICT = 1e-3
+
+
 def make_contact(X, left, right, **kw) -> FlankContact:
     kw.setdefault("max_depth_mm", 0.5)
     c = FlankContact(X, left, right, **kw)
@@ -299,7 +305,7 @@ def squares():
 
 def test_force_vector_is_the_gradient_of_the_energy(squares) -> None:
     X, left, right, rnodes = squares
-    contact = make_contact(X, left, right)
+    contact = make_contact(X, left, right, bary_tol=STRICT)
     rng = np.random.default_rng(5)
     u0 = penetrating_state(rng, X, rnodes, depth=0.03, noise=0.01)
     f = contact.force_vector(u0)
@@ -327,7 +333,7 @@ def test_tangent_is_the_derivative_of_the_force(squares, exact_depth_rel: float)
     """With the geometric term everywhere (exact_depth_rel = inf, the default) at a deep generic
     state; with the quasi-Newton cut-off 1e-3 at a state where every |g| <= 1e-3 h (the term is then kept)."""
     X, left, right, rnodes = squares
-    contact = make_contact(X, left, right, exact_depth_rel=exact_depth_rel)
+    contact = make_contact(X, left, right, exact_depth_rel=exact_depth_rel, bary_tol=STRICT)
     rng = np.random.default_rng(6)
     if np.isfinite(exact_depth_rel):
         # Shallow state: in-plane noise only (both surfaces stay flat), overlap 1e-4 while
@@ -423,3 +429,25 @@ def test_flanks_that_do_not_face_each_other_are_not_in_contact() -> None:
     U = np.zeros_like(X)
     U[len(pl) :, 0] = -0.01
     assert len(contact.pairs(U.ravel()).gap_mm) == 0
+
+
+def test_frozen_pairing_engages_live_and_refresh_reports_a_new_pairing(squares) -> None:
+    """Frozen mode (used by the stages): the pairing of `freeze` is kept while engagement
+    follows the state; `refresh` re-searches and says whether the forces changed."""
+    X, left, right, rnodes = squares
+    contact = make_contact(X, left, right)
+    U = np.zeros_like(X)
+    U[rnodes, 0] = 0.01  # apart by 0.01 < h: every point is a candidate, none engaged
+    contact.freeze(U.ravel())
+    searches = contact.searches
+    assert len(contact.pairs(U.ravel()).gap_mm) == 0
+    U[rnodes, 0] = -0.001  # pushed in: engaged with the frozen pairing, no new search
+    pr = contact.pairs(U.ravel())
+    assert len(pr.gap_mm) > 0 and contact.searches == searches
+    np.testing.assert_allclose(pr.gap_mm, -0.001, rtol=1e-9)
+    assert not contact.refresh(U.ravel(), tol=1e-9)  # pushed straight in: same pairing
+    U[rnodes, 1] = 0.6 * facet_size(4)  # slid along the surface: other master facets
+    assert contact.refresh(U.ravel(), tol=1e-9)
+    assert not contact.refresh(U.ravel(), tol=1e-9)  # now consistent with its own pairing
+    contact.unfreeze()
+    assert not contact.frozen and contact.refresh(U.ravel(), tol=1e-9) is False

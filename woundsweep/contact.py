@@ -16,10 +16,12 @@ configuration. Units: lengths mm, k_V kPa (1 GPa = 1e6 kPa), forces mN, energy m
   flank, g = (x_q - x_1) . n with n = (x_2 - x_1) x (x_3 - x_1) / |...| the deformed unit
   normal; g < 0 means that the point is behind the master surface: -g is its depth in the
   master body, measured normal to the master surface (the "material depth").
-- Pairing, searched afresh at every new state (the residual is a function of u alone):
-  the master facet of a point is the closest one (exact point-triangle distance) among the
-  ``neighbours`` facets with the nearest deformed centroids (scipy cKDTree; facets sharing a
-  node with the point's own facet are skipped). The point is engaged when g < touch_rel * h_q
+- Pairing: the master facet of a point is the closest one (exact point-triangle distance)
+  among the ``neighbours`` facets with the nearest deformed centroids (scipy cKDTree; facets
+  sharing a node with the point's own facet are skipped). Two modes: live (default; searched
+  afresh at every new state, the residual is a function of u alone) and frozen (`freeze`:
+  the pairing of one state is kept, only engagement follows the state; used by the wound
+  model, see Linearisation). The point is engaged when g < touch_rel * h_q
   (touching counts; ``touch_rel`` = 1e-9), the orthogonal projection of x_q lies inside the
   facet (barycentric coordinates >= -bary_tol; 0.05 keeps a point paired where it slides
   over the edge between two facets whose planes differ and its projection misses both: at
@@ -38,11 +40,15 @@ configuration. Units: lengths mm, k_V kPa (1 GPa = 1e6 kPa), forces mN, energy m
   The point stiffness c = w k_V A_q / h_q is in mN/mm, the normal force c (-g) in mN.
 - Linearisation. Residual c g dg/dq and tangent c (dg/dq dg/dq^T + g d2g/dq2) over the
   coordinates of the slave facet's and the master facet's nodes, both exact (analytic,
-  `gap_derivatives`) for the current pairing; ``exact_depth_rel`` can drop the geometric term
-  g d2g/dq2 where |g| > exact_depth_rel h (a quasi-Newton option, off by default). The pairing
-  itself is piecewise constant in u: Newton sees the exact derivative wherever it is defined,
-  and a change of pairing between steps is an ordinary non-smooth event of a penalty method,
-  absorbed by the relaxation and the load continuation of `woundsweep.newton`.
+  `gap_derivatives`) for a given pairing; ``exact_depth_rel`` can drop the geometric term
+  g d2g/dq2 where |g| > exact_depth_rel h (a quasi-Newton option, off by default). The
+  pairing itself is piecewise constant in u, and a live pairing that changes between Newton
+  iterates (points sliding over facet edges) made Newton cycle. The wound model therefore
+  solves each load increment with the pairing frozen (a smooth problem apart from the
+  engagement kink at g = 0) and, once Newton has converged, re-searches it (`refresh`): if
+  the new pairing changes the contact forces by more than the residual tolerance, Newton
+  continues from there with it; the increment converges only when the state is an
+  equilibrium of its own pairing (an outer fixed point checked on the residual).
 - Assembly. Residual contributions are summed into the flat dof vector with ``np.bincount``;
   tangent blocks go to the PETSc matrix as one CSR batch (``Mat.setValuesCSR``, ADD_VALUES).
   Couplings across the wound are not in the finite-element sparsity pattern: the matrix may
@@ -350,6 +356,8 @@ class FlankContact:
         self.k_V_kPa = 0.0
         self.near_rel = float(near_rel)
         self._found: _Candidates | None = None
+        self._search_x: np.ndarray | None = None
+        self.frozen = False  # True: `pairs` reuses the pairing of the last `freeze`
         self._cand: tuple[np.ndarray, np.ndarray, np.ndarray] = (np.zeros(0),) * 3
         self._version = 0
         self._cache_x: np.ndarray | None = None
@@ -416,15 +424,44 @@ class FlankContact:
         )  # fmt: skip
 
     def _search(self, u: np.ndarray) -> None:
-        """Find the contact candidates of both passes at ``u``."""
+        """Find the contact candidates of both passes at ``u`` (nothing to do if the last
+        search was at the same flank positions)."""
         t0 = time.perf_counter()
         x = self.positions(u)
+        xn = x[self.nodes]
+        if self._found is not None and np.array_equal(xn, self._search_x):
+            return
+        self._search_x = xn.copy()
         parts = [self._detect_one(x, side) for side in (0, 1)]
         self._found = _Candidates(*(np.concatenate([p[i] for p in parts]) for i in range(6)),
                                   sum(p[6] for p in parts))  # fmt: skip
         self._version += 1
         self.detect_time_s += time.perf_counter() - t0
         self.searches += 1
+
+    def freeze(self, u: np.ndarray) -> None:
+        """Search the pairing at ``u`` and keep it (master facet of every candidate point)
+        until the next `freeze` or `unfreeze`; engagement (g < touch) stays live."""
+        self._search(u)
+        self.frozen = True
+
+    def unfreeze(self) -> None:
+        """Search afresh at every new state again."""
+        self.frozen = False
+        self._found = None
+        self._version += 1
+
+    def refresh(self, u: np.ndarray, tol: float) -> bool:
+        """Re-search the pairing at ``u`` (frozen mode); True when the new pairing changes the
+        contact forces by more than ``tol`` (mN, Euclidean norm): ``u`` is then not yet an
+        equilibrium of its own pairing (the outer fixed-point check, module docstring)."""
+        if not self.frozen or self.k_V_kPa <= 0.0:
+            return False
+        before = self.force_vector(u)
+        self.freeze(u)
+        after = self.force_vector(u)
+        self.refreshes += 1
+        return bool(np.linalg.norm(after - before) > tol)
 
     def pairs(self, u: np.ndarray) -> ContactPairs:
         """Engaged contact points at displacement ``u``; cached by the flank node positions."""
@@ -433,7 +470,8 @@ class FlankContact:
         key = (self.k_V_kPa, self._version)
         if self._cache is not None and self._cache_key == key and np.array_equal(xn, self._cache_x):
             return self._cache
-        self._search(u)
+        if not self.frozen or self._found is None:
+            self._search(u)
         key = (self.k_V_kPa, self._version)
         fr = self._found
         assert fr is not None
@@ -443,7 +481,7 @@ class FlankContact:
         nrm = np.cross(pm[:, 1] - pm[:, 0], pm[:, 2] - pm[:, 0])
         g = _dot(xq - pm[:, 0], nrm) / np.linalg.norm(nrm, axis=1)
         self._cand = (g, fr.size_mm, TWO_PASS_WEIGHT * self.k_V_kPa * fr.area_mm2 / fr.size_mm)
-        act = fr.engaged
+        act = g < self.touch_rel * fr.size_mm if self.frozen else fr.engaged
         stiff = self._cand[2][act]
         out = ContactPairs(
             fr.carrier[act], fr.bary[act], fr.master[act], g[act], stiff, fr.size_mm[act],
@@ -577,8 +615,9 @@ class FlankContact:
         )
 
     def reset_timers(self) -> None:
-        """Zero the counters: search time, assembly time, evaluations, searches."""
+        """Zero the counters: search time, assembly time, evaluations, searches, refreshes."""
         self.detect_time_s = 0.0  # cumulative: candidate searches
         self.assembly_time_s = 0.0  # cumulative: gaps, residual and tangent contributions
         self.evaluations = 0
         self.searches = 0
+        self.refreshes = 0

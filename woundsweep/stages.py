@@ -221,6 +221,7 @@ class WoundModel:
     """
 
     CONTACT_START_kPa = 100.0  # stage 4's penalty ramp starts here: a soft-tissue modulus
+    CONTACT_FROZEN = True  # Newton solves with the pairing frozen, re-searched at convergence
 
     def __init__(
         self,
@@ -427,6 +428,12 @@ class WoundModel:
         compat.assemble_vector(b, self.R_form)
         if self._contact_on():
             self.contact.add_residual(b, self.u.x.array)  # type: ignore[union-attr]
+
+    def refresh(self, tol: float) -> bool:
+        """Newton's hook at a converged state: re-search a frozen contact pairing (contact.py)."""
+        if not self._contact_on():
+            return False
+        return self.contact.refresh(self.u.x.array, tol)  # type: ignore[union-attr]
 
     def jacobian(self, A: PETSc.Mat) -> None:
         compat.assemble_matrix(A, self.a_form)
@@ -681,11 +688,17 @@ class WoundModel:
 
         def load(s: float) -> LoadState:
             c.k_V_kPa = k_from ** (1.0 - s) * k_to**s
+            if self.CONTACT_FROZEN:
+                c.freeze(u)  # the pairing of the last converged state
             return LoadState(values, (1.0 - s) * offset)
 
         # The residual of a penetrating start holds penalty forces far above the physical
         # ones; they must not set the convergence tolerance.
         self.newton.scale_from_residual = False
+        settings = self.newton.settings
+        self.newton.settings = dataclasses.replace(
+            settings, rtol=max(settings.rtol, settings.contact_rtol)
+        )
         try:
             decades = np.log10(k_to / k_from)
             res = continuation(
@@ -693,7 +706,9 @@ class WoundModel:
             )
         finally:
             self.newton.scale_from_residual = True
+            self.newton.settings = settings
             c.k_V_kPa = k_to
+            c.unfreeze()
         r = self._residual_array()
         diag["closure_gap_mm"] = self.closure_gap()
         diag["pin_reaction_max_mN"] = float(np.max(np.abs(r[self._pin_rows()])))

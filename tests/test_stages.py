@@ -300,3 +300,22 @@ def test_newton_statuses_inverted_and_linear_solver_failed(box_model) -> None:
     offset[2] = 1.0  # a load, so that a step is needed
     res = newton.solve(np.zeros(0, dtype=np.int32), np.zeros(0), offset)
     assert res.status == "linear-solver-failed"
+
+
+def test_stage_iteration_budget_ends_a_long_continuation(box_model) -> None:
+    """A stage that needs more Newton steps than ``max_stage_iterations`` in all its load
+    increments stops as ``max-iterations`` before the end of its load."""
+    from woundsweep.newton import NewtonSettings, NewtonSolver
+    from woundsweep.stages import JobMaterials
+
+    m = box_model
+    saved = m.newton
+    try:
+        st = NewtonSettings(load_steps=4, max_stage_iterations=2)
+        m.newton = NewtonSolver(m, m.A, st)
+        m.set_materials(JobMaterials.table2("soft", 0.0))
+        out = m.run_stage(1)
+    finally:
+        m.newton = saved
+    assert out.solve.status == "max-iterations"
+    assert 0.0 < out.solve.load_reached < 1.0 and out.solve.iterations > 2

@@ -125,6 +125,7 @@ DEFAULTS: dict[str, Any] = {
     "solver": {
         "quadrature_degree": 1,
         "max_iterations": 60,
+        "max_stage_iterations": 1000,
         "rtol": 1e-8,
         "atol": 1e-10,
         "stol": 1e-8,

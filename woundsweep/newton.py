@@ -74,6 +74,7 @@ class NewtonSettings:
     """Numerical settings (sweep section ``solver``; unknown keys there are ignored here)."""
 
     max_iterations: int = 60  # Newton steps per load increment
+    max_stage_iterations: int = 1000  # Newton steps per stage (all increments): bounds the cost
     rtol: float = 1e-8  # residual, relative to the force scale
     atol: float = 1e-10  # residual floor, mN
     stol: float = 1e-8  # increment and Dirichlet mismatch, relative to the length scale
@@ -386,6 +387,11 @@ def continuation(
         its += res.iterations
         times += (res.assembly_time_s, res.factor_time_s, res.solve_time_s, res.residual_time_s)
         if res.status == CONVERGED:
+            if its > st.max_stage_iterations and s_next < 1.0:  # out of budget, not done
+                return ContinuationResult(
+                    MAX_ITERATIONS, its, incs + 1, cuts, s_next, res.residual_norm, res.min_det,
+                    *times,
+                )  # fmt: skip
             incs += 1
             s = s_next
             cuts_in_row = 0
@@ -396,7 +402,7 @@ def continuation(
         cuts += 1
         cuts_in_row += 1
         newton.gamma = 1.0
-        if cuts_in_row > st.max_load_cuts:
+        if cuts_in_row > st.max_load_cuts or its > st.max_stage_iterations:
             return ContinuationResult(
                 res.status, its, incs, cuts, s, res.residual_norm, res.min_det, *times
             )

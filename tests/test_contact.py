@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from box_mesh import boundary_facets, box_tets
 
 from woundsweep.contact import (
     GPA_TO_KPA,
@@ -23,28 +24,6 @@ from woundsweep.contact import (
 )
 
 # -- helpers -----------------------------------------------------------------------------------
-
-
-def box_tets(n: int, lo: tuple[float, float, float], hi: tuple[float, float, float]):
-    """Structured tetrahedral box: n^3 grid boxes, six tets each. Returns (points, cells)."""
-    axes = [np.linspace(a, b, n + 1) for a, b in zip(lo, hi)]
-    X, Y, Z = np.meshgrid(*axes, indexing="ij")
-    pts = np.c_[X.ravel(), Y.ravel(), Z.ravel()]
-    idx = lambda i, j, k: (i * (n + 1) + j) * (n + 1) + k  # noqa: E731
-    ii, jj, kk = (a.ravel() for a in np.meshgrid(range(n), range(n), range(n), indexing="ij"))
-    corners = [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0), (0, 0, 1), (1, 0, 1), (1, 1, 1),
-               (0, 1, 1)]  # fmt: skip
-    V = np.stack([idx(ii + a, jj + b, kk + c) for a, b, c in corners], axis=1)
-    tets = [(0, 1, 2, 6), (0, 2, 3, 6), (0, 3, 7, 6), (0, 7, 4, 6), (0, 4, 5, 6), (0, 5, 1, 6)]
-    return pts, np.concatenate([V[:, list(t)] for t in tets])
-
-
-def boundary_facets(cells: np.ndarray) -> np.ndarray:
-    """Faces that belong to one cell only (sorted node order, i.e. arbitrary orientation)."""
-    faces = np.concatenate([cells[:, [1, 2, 3]], cells[:, [0, 2, 3]], cells[:, [0, 1, 3]],
-                            cells[:, [0, 1, 2]]])  # fmt: skip
-    uniq, count = np.unique(np.sort(faces, axis=1), axis=0, return_counts=True)
-    return uniq[count == 1]
 
 
 def normals(X: np.ndarray, tri: np.ndarray) -> np.ndarray:

@@ -28,6 +28,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 import pytest
+from box_mesh import boundary_facets, box_tets
 
 from woundsweep.contact import GPA_TO_KPA, ContactSummary, FlankContact, orient_outward
 from woundsweep.materials import Fung, first_piola
@@ -39,30 +40,6 @@ PRESSURE_KPA = 10.0
 AREA_MM2 = 1.0
 K_V_GPA = (1.0, 5.0, 100.0)
 LOAD = 1  # facet tag of R's x = +1 face (local to this test)
-
-
-def box_tets(n: tuple[int, int, int], lo: tuple[float, float, float],
-             hi: tuple[float, float, float]):  # fmt: skip
-    """Structured tetrahedral box: n[0] x n[1] x n[2] grid boxes, six tets each.
-    Returns (points, cells)."""
-    nx, ny, nz = n
-    axes = [np.linspace(a, b, m + 1) for a, b, m in zip(lo, hi, n)]
-    X, Y, Z = np.meshgrid(*axes, indexing="ij")
-    pts = np.c_[X.ravel(), Y.ravel(), Z.ravel()]
-    idx = lambda i, j, k: (i * (ny + 1) + j) * (nz + 1) + k  # noqa: E731
-    ii, jj, kk = (a.ravel() for a in np.meshgrid(range(nx), range(ny), range(nz), indexing="ij"))
-    corners = [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0), (0, 0, 1), (1, 0, 1), (1, 1, 1),
-               (0, 1, 1)]  # fmt: skip
-    V = np.stack([idx(ii + a, jj + b, kk + c) for a, b, c in corners], axis=1)
-    tets = [(0, 1, 2, 6), (0, 2, 3, 6), (0, 3, 7, 6), (0, 7, 4, 6), (0, 4, 5, 6), (0, 5, 1, 6)]
-    return pts, np.concatenate([V[:, list(t)] for t in tets])
-
-
-def boundary_facets(cells: np.ndarray) -> np.ndarray:
-    faces = np.concatenate([cells[:, [1, 2, 3]], cells[:, [0, 2, 3]], cells[:, [0, 1, 3]],
-                            cells[:, [0, 1, 2]]])  # fmt: skip
-    uniq, count = np.unique(np.sort(faces, axis=1), axis=0, return_counts=True)
-    return uniq[count == 1]
 
 
 def uniaxial_state(material: Fung, p: float) -> tuple[float, float]:

@@ -76,6 +76,7 @@ __all__ = [
     "Surface",
     "gap_derivatives",
     "orient_outward",
+    "owning_cells",
     "point_triangle_distance",
     "split_wound_flanks",
 ]
@@ -89,8 +90,7 @@ class Surface(NamedTuple):
 
     facets: np.ndarray  # (nf, 3) node indices, normal (right-hand rule) points out of the body
     nodes: np.ndarray  # (ns,) the facets' nodes, sorted
-    area_mm2: np.ndarray  # (ns,) tributary reference area of each node
-    size_mm: np.ndarray  # (ns,) local element size h_s of each node
+    size_mm: np.ndarray  # (ns,) element size at each node (mean over its facets)
 
 
 class ContactPairs(NamedTuple):
@@ -213,24 +213,30 @@ def _face_keys(tri: np.ndarray, n: int) -> np.ndarray:
     return (t[:, 0] * n + t[:, 1]) * n + t[:, 2]
 
 
+def owning_cells(cells: np.ndarray, facets: np.ndarray, n_points: int) -> np.ndarray:
+    """Index of a cell (m, 4) of which each facet (k, 3) is a face (same node numbering)."""
+    cells = np.asarray(cells, dtype=np.int64)
+    faces = np.concatenate([cells[:, [1, 2, 3]], cells[:, [0, 2, 3]], cells[:, [0, 1, 3]],
+                            cells[:, [0, 1, 2]]])  # fmt: skip
+    owner = np.tile(np.arange(len(cells)), 4)
+    keys = _face_keys(faces, n_points)
+    order = np.argsort(keys)
+    want = _face_keys(facets, n_points)
+    pos = np.minimum(np.searchsorted(keys, want, sorter=order), len(order) - 1)
+    if not np.all(keys[order[pos]] == want):
+        raise ValueError("a boundary facet is not a face of any cell")
+    return owner[order[pos]]
+
+
 def orient_outward(X: np.ndarray, cells: np.ndarray, facets: np.ndarray) -> np.ndarray:
     """Boundary facets (node indices) reordered so that their normal points out of the body.
 
     ``X`` (n, 3) node coordinates, ``cells`` (m, 4) tetrahedra in the same node numbering.
     """
-    cells = np.asarray(cells, dtype=np.int64)
     facets = np.asarray(facets, dtype=np.int64).reshape(-1, 3)
-    n = len(X)
-    opposite = [(1, 2, 3, 0), (0, 2, 3, 1), (0, 1, 3, 2), (0, 1, 2, 3)]
-    faces = np.concatenate([cells[:, list(o[:3])] for o in opposite])
-    apex = np.concatenate([cells[:, o[3]] for o in opposite])
-    keys = _face_keys(faces, n)
-    order = np.argsort(keys)
-    want = _face_keys(facets, n)
-    pos = np.minimum(np.searchsorted(keys, want, sorter=order), len(order) - 1)
-    if not np.all(keys[order[pos]] == want):
-        raise ValueError("a contact facet is not a face of any cell")
-    inner = X[apex[order[pos]]]
+    owner = np.asarray(cells, dtype=np.int64)[owning_cells(cells, facets, len(X))]
+    apex = owner[np.all(owner[:, :, None] != facets[:, None, :], axis=2)]  # node off the facet
+    inner = X[apex]
     p = X[facets]
     nrm = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
     flip = _dot(nrm, inner - p[:, 0]) > 0.0  # normal points toward the cell: flip it
@@ -245,9 +251,8 @@ def _surface(X: np.ndarray, facets: np.ndarray) -> Surface:
     nodes, inv = np.unique(facets.ravel(), return_inverse=True)
     tri_area = np.bincount(inv, weights=np.repeat(area, 3), minlength=len(nodes))
     count = np.bincount(inv, minlength=len(nodes))
-    mean_area = tri_area / count
-    size = np.sqrt(4.0 * mean_area / np.sqrt(3.0))  # side of the equilateral triangle
-    return Surface(facets, nodes, tri_area / 3.0, size)
+    size = np.sqrt(4.0 * (tri_area / count) / np.sqrt(3.0))  # side of the equilateral triangle
+    return Surface(facets, nodes, size)
 
 
 def split_wound_flanks(

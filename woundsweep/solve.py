@@ -291,7 +291,7 @@ def solve_job(
             zone=ClosureZone.from_sweep(run.sweep.stages),
             settings=NewtonSettings.from_mapping(solver),
             jit=jit,
-            contact_penalty_GPa=tuple(run.sweep.stages.get("contact_penalty_GPa", (1, 5, 100))),
+            contact_penalty_GPa=tuple(run.sweep.stages["contact_penalty_GPa"]),
         )
     except ValueError as err:  # the mesh's tags or numbering do not fit the contract
         raise GeometryError(f"job {job_index}: unusable mesh: {err}") from None

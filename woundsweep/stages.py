@@ -63,7 +63,7 @@ import ufl
 from petsc4py import PETSc
 
 from . import compat
-from .contact import GPA_TO_KPA, FlankContact, split_wound_flanks
+from .contact import GPA_TO_KPA, FlankContact, owning_cells, split_wound_flanks
 from .materials import (
     FLYNN_SKIN_TYPES,
     Fung,
@@ -193,25 +193,6 @@ def _assign(consts: Mapping[str, Any], material: Material) -> None:
         c.value = np.asarray(getattr(material, name), dtype=float)
 
 
-def _face_keys(tri: np.ndarray, n: int) -> np.ndarray:
-    t = np.sort(np.asarray(tri, dtype=np.int64), axis=1)
-    return (t[:, 0] * n + t[:, 1]) * n + t[:, 2]
-
-
-def _owning_cells(cells: np.ndarray, facets: np.ndarray, n_points: int) -> np.ndarray:
-    """Index of the cell each boundary facet bounds (input numbering)."""
-    faces = np.concatenate([cells[:, [1, 2, 3]], cells[:, [0, 2, 3]], cells[:, [0, 1, 3]],
-                            cells[:, [0, 1, 2]]])  # fmt: skip
-    owner = np.tile(np.arange(len(cells)), 4)
-    keys = _face_keys(faces, n_points)
-    order = np.argsort(keys)
-    want = _face_keys(facets, n_points)
-    pos = np.minimum(np.searchsorted(keys, want, sorter=order), len(order) - 1)
-    if not np.all(keys[order[pos]] == want):
-        raise ValueError("a boundary facet is not a face of any cell")
-    return owner[order[pos]]
-
-
 class WoundModel:
     """Forms, boundary sets and stage logic for one mesh; materials can be reassigned.
 
@@ -221,7 +202,6 @@ class WoundModel:
     """
 
     CONTACT_START_kPa = 100.0  # stage 4's penalty ramp starts here: a soft-tissue modulus
-    CONTACT_FROZEN = True  # Newton solves with the pairing frozen, re-searched at convergence
 
     def __init__(
         self,
@@ -349,7 +329,7 @@ class WoundModel:
         self.zone_right_nodes = self.zone_nodes[self.X[self.zone_nodes, 0] >= self.x_c]
 
         lateral = np.flatnonzero(np.isin(ftags, (X_MIN, X_MAX, Y_MIN, Y_MAX)))
-        owner = _owning_cells(self.cells, facets[lateral], n_pts)
+        owner = owning_cells(self.cells, facets[lateral], n_pts)
         layer = np.where(self.cell_tags[owner] == DERMIS, LATERAL_DERMIS, LATERAL_SUBCUTIS)
         p = self.points[facets[lateral]]
         area = 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
@@ -559,10 +539,7 @@ class WoundModel:
         return out
 
     def _ramp(
-        self,
-        rows: np.ndarray,
-        target: np.ndarray,
-        offset: np.ndarray | None,
+        self, rows: np.ndarray, target: np.ndarray, offset: np.ndarray | None
     ) -> ContinuationResult:
         u = self.u.x.array
         start = u[rows].copy()
@@ -664,9 +641,10 @@ class WoundModel:
     def _stage_contact(self, stage: int) -> tuple[ContinuationResult, dict[str, float]]:
         """Stages 4-6: the stage-3 loads plus flank contact at this stage's penalty.
 
-        The penalty is ramped geometrically from the previous stage's (stage 4: from
-        ``CONTACT_START_kPa``) to this stage's value, so an overlap left by stage 3 is pushed
-        out gradually instead of by a force of order k_V at once.
+        Stage 4 restarts from the stage-2 state (module docstring). The penalty is ramped
+        geometrically from the previous stage's (stage 4: from ``CONTACT_START_kPa``) to this
+        stage's value, so an overlap left by the closure is pushed out gradually instead of by
+        a force of order k_V at once.
         """
         rows = self._gauge_rows()
         u = self.u.x.array
@@ -688,8 +666,7 @@ class WoundModel:
 
         def load(s: float) -> LoadState:
             c.k_V_kPa = k_from ** (1.0 - s) * k_to**s
-            if self.CONTACT_FROZEN:
-                c.freeze(u)  # the pairing of the last converged state
+            c.freeze(u)  # the pairing of the last converged state; Newton refreshes it
             return LoadState(values, (1.0 - s) * offset)
 
         # The residual of a penetrating start holds penalty forces far above the physical

@@ -17,6 +17,8 @@ from box_mesh import boundary_facets, box_tets
 from woundsweep.contact import (
     GPA_TO_KPA,
     FlankContact,
+    barycentric_derivatives,
+    fade_weight,
     gap_derivatives,
     orient_outward,
     point_triangle_distance,
@@ -262,12 +264,6 @@ def assert_same_pairing(contact: FlankContact, ref, u: np.ndarray) -> None:
     np.testing.assert_array_equal(ref.bary, b.bary)
 
 
-# Finite-difference checks need a pairing that a small perturbation cannot change: with the
-# default bary_tol (0.05) a point near a shared edge of two non-coplanar master facets is
-# inside both, and the closer one can switch under the perturbation.
-STRICT = 1e-3
-
-
 def make_contact(X, left, right, **kw) -> FlankContact:
     kw.setdefault("max_depth_mm", 0.5)
     c = FlankContact(X, left, right, **kw)
@@ -284,12 +280,13 @@ def squares():
 
 def test_force_vector_is_the_gradient_of_the_energy(squares) -> None:
     X, left, right, rnodes = squares
-    contact = make_contact(X, left, right, bary_tol=STRICT)
+    contact = make_contact(X, left, right)
     rng = np.random.default_rng(5)
     u0 = penetrating_state(rng, X, rnodes, depth=0.03, noise=0.01)
     f = contact.force_vector(u0)
     pr = contact.pairs(u0)
     assert np.all(pr.gap_mm < 0) and len(pr.gap_mm) > 0.8 * 6 * (len(left) + len(right))
+    assert np.any(pr.weight < 1.0)  # points in an edge fade band are covered too
     h = 1e-6
     fd = np.empty_like(u0)
     for i in range(len(u0)):
@@ -312,7 +309,7 @@ def test_tangent_is_the_derivative_of_the_force(squares, exact_depth_rel: float)
     """With the geometric term everywhere (exact_depth_rel = inf, the default) at a deep generic
     state; with the quasi-Newton cut-off 1e-3 at a state where every |g| <= 1e-3 h (the term is then kept)."""
     X, left, right, rnodes = squares
-    contact = make_contact(X, left, right, exact_depth_rel=exact_depth_rel, bary_tol=STRICT)
+    contact = make_contact(X, left, right, exact_depth_rel=exact_depth_rel)
     rng = np.random.default_rng(6)
     if np.isfinite(exact_depth_rel):
         # Shallow state: in-plane noise only (both surfaces stay flat), overlap 1e-4 while
@@ -430,3 +427,69 @@ def test_frozen_pairing_engages_live_and_refresh_reports_a_new_pairing(squares) 
     assert not contact.refresh(U.ravel(), tol=1e-9)  # now consistent with its own pairing
     contact.unfreeze()
     assert not contact.frozen and contact.refresh(U.ravel(), tol=1e-9) is False
+
+
+# -- edge fade ----------------------------------------------------------------------------------
+
+
+def test_barycentric_derivatives_match_finite_differences() -> None:
+    rng = np.random.default_rng(11)
+    xs, x1, x2, x3 = random_triangles(rng, 40)
+    lam, dlam = barycentric_derivatives(xs, x1, x2, x3)
+    np.testing.assert_allclose(lam.sum(axis=1), 1.0, atol=1e-12)
+    # The projection sum lam_i x_i differs from xs only along the normal.
+    proj = lam[:, 0:1] * x1 + lam[:, 1:2] * x2 + lam[:, 2:3] * x3
+    n = np.cross(x2 - x1, x3 - x1)
+    np.testing.assert_allclose(np.cross(xs - proj, n), 0.0, atol=1e-10)
+    q = np.concatenate([xs, x1, x2, x3], axis=1)
+    h = 1e-6
+    for j in range(12):
+        e = np.zeros(12)
+        e[j] = h
+        qp, qm = q + e, q - e
+        lp = barycentric_derivatives(qp[:, 0:3], qp[:, 3:6], qp[:, 6:9], qp[:, 9:12])[0]
+        lm = barycentric_derivatives(qm[:, 0:3], qm[:, 3:6], qm[:, 6:9], qm[:, 9:12])[0]
+        np.testing.assert_allclose((lp - lm) / (2 * h), dlam[:, :, j], atol=1e-7)
+
+
+def test_fade_weight_values_and_derivatives() -> None:
+    width = 0.25
+    lam = np.array([[0.2, 0.5, 0.3], [-0.125, 0.6, 0.525], [-0.3, 0.5, 0.8], [-0.05, -0.1, 1.15]])
+    w, dw, d2w = fade_weight(lam, width)
+    # s(lam) = 1 - 3 t^2 + 2 t^3, t = -lam / width: t = 1/2 gives 1/2; t >= 1 gives 0.
+    np.testing.assert_allclose(w[:3], [1.0, 0.5, 0.0])
+    s = lambda t: 1 - 3 * t**2 + 2 * t**3  # noqa: E731
+    np.testing.assert_allclose(w[3], s(0.2) * s(0.4))
+    h = 1e-6
+    for j in range(3):
+        e = np.zeros(3)
+        e[j] = h
+        wp, dwp, _ = fade_weight(lam + e, width)
+        wm, dwm, _ = fade_weight(lam - e, width)
+        np.testing.assert_allclose((wp - wm) / (2 * h), dw[:, j], atol=1e-7)
+        np.testing.assert_allclose((dwp - dwm) / (2 * h), d2w[:, :, j], atol=1e-5)
+
+
+def _slide_forces(steps: int, fade_width: float = 0.25) -> np.ndarray:
+    """x-force on the right square (3 x 3 facets, pushed 1e-3 into the left 4 x 4 one) while it
+    slides by 0.3 along y, so that left contact points cross its boundary edge at y = 1."""
+    X, left, right, rnodes = two_squares(4, 3)
+    contact = make_contact(X, left, right, fade_width=fade_width)
+    out = []
+    for dy in np.linspace(0.0, 0.3, steps):
+        U = np.zeros_like(X)
+        U[rnodes, 0] = -1e-3
+        U[rnodes, 1] = dy
+        out.append(contact.force_vector(U.ravel()).reshape(-1, 3)[rnodes, 0].sum())
+    return np.array(out)
+
+
+def test_force_fades_continuously_off_a_boundary_edge() -> None:
+    """Without the fade a contact point leaving the other surface over its edge drops its
+    whole force at once, and the largest jump between slide steps stays when the step is
+    halved (checked: fade_width 1e-9 gives a ratio of ~1). With it the force is Lipschitz in
+    the slide: halving the step halves the largest jump."""
+    coarse, fine = np.abs(_slide_forces(61)), np.abs(_slide_forces(121))
+    jump_c, jump_f = np.abs(np.diff(coarse)).max(), np.abs(np.diff(fine)).max()
+    assert coarse[-1] < 0.8 * coarse[0]  # the overlap area shrinks: points did leave
+    assert jump_f / jump_c < 0.6

@@ -21,26 +21,38 @@ configuration. Units: lengths mm, k_V kPa (1 GPa = 1e6 kPa), forces mN, energy m
   sharing a node with the point's own facet are skipped). Two modes: live (default; searched
   afresh at every new state, the residual is a function of u alone) and frozen (`freeze`:
   the pairing of one state is kept, only engagement follows the state; used by the wound
-  model, see Linearisation). The point is engaged when g < touch_rel * h_q
-  (touching counts; ``touch_rel`` = 1e-9), the orthogonal projection of x_q lies inside the
-  facet (barycentric coordinates >= -bary_tol; 0.05 keeps a point paired where it slides
-  over the edge between two facets whose planes differ and its projection misses both: at
-  45 degrees the flanks slide along each other, and with 1e-3 such points dropped in and out
-  of contact and Newton cycled), the flanks face each other there
+  model, see Linearisation). Among the candidates the one the projection falls into wins
+  (score: distance + (1 - phi) * facet size, phi the edge fade below): past the edge between
+  two facets the exact distances tie, the fades do not. The point is engaged when
+  g < touch_rel * h_q (touching counts; ``touch_rel`` = 1e-9), its fade phi > 0 (the
+  orthogonal projection of x_q lies less than ``fade_width`` = 0.25 in barycentric units
+  beyond the facet's edges), the flanks face each other there
   (n_q . n <= normal_cos, n_q the deformed normal of the slave facet: this keeps the two
   flanks of a smooth wound bottom, which are continuous and coplanar there, from being taken
   for penetration), and the depth -g <= max_depth_mm (deeper points are counted as
   ``n_deep`` and carry no force; the wound model uses the wound depth).
-- Energy. Pi_c = sum over engaged points of (w / 2) (k_V / h_q) A_q g^2 with w = 1/2 because
+- Edge fade. A point whose projection leaves its master facet across an edge where no other
+  facet takes over (the rim of a flank, the line where the flanks meet, facets skipped as
+  the point's own neighbours) used to drop out of contact with its whole force at once, and
+  Newton cycled between the two pairings (measured: a deep 90-degree wedge, 4 points in a
+  2-cycle of 2 mN jumps; the lips of a 45-degree cylinder). Each point's energy is therefore
+  multiplied by phi = prod_i s(lam_i), lam_i the barycentric coordinates of the projection
+  and s(lam) = 1 - 3 t^2 + 2 t^3 with t = clip(-lam / fade_width, 0, 1): phi = 1 on the
+  facet, falls to 0 at fade_width beyond an edge, and is C1, so the force fades instead of
+  jumping. Penetration is reported only for points with phi = 1 (`summary`).
+- Energy. Pi_c = sum over engaged points of phi (w / 2) (k_V / h_q) A_q g^2 with w = 1/2 because
   each flank is slave once and master once (two-pass): when both passes see the same
   overlap, each carries half the load. The contact pressure per reference area is therefore
   p = k_V (-g) / h_q: k_V has stress units, like the paper's "material depth" penalty (a
   layer of thickness h with modulus k_V), and the penetration at pressure p is
   -g = p h / k_V, relative to the element size p / k_V (1e-4 at p = 100 kPa, k_V = 1 GPa).
   The point stiffness c = w k_V A_q / h_q is in mN/mm, the normal force c (-g) in mN.
-- Linearisation. Residual c g dg/dq and tangent c (dg/dq dg/dq^T + g d2g/dq2) over the
-  coordinates of the slave facet's and the master facet's nodes, both exact (analytic,
-  `gap_derivatives`) for a given pairing; ``exact_depth_rel`` can drop the geometric term
+- Linearisation. Residual c (phi g dg/dq + g^2 / 2 dphi/dq) and tangent
+  c (phi (dg/dq dg/dq^T + g d2g/dq2) + g (dg/dq dphi/dq^T + dphi/dq dg/dq^T)
+  + g^2 / 2 d2phi/dq2) over the coordinates of the slave facet's and the master facet's
+  nodes, for a given pairing: g, dg, d2g and dlam analytic (`gap_derivatives`,
+  `barycentric_derivatives`), d2lam by central differences of dlam (only for the few points
+  with phi < 1; agrees with finite differences of the force to 1e-6 in the tests); ``exact_depth_rel`` can drop the geometric term
   g d2g/dq2 where |g| > exact_depth_rel h (a quasi-Newton option, off by default). The
   pairing itself is piecewise constant in u, and a live pairing that changes between Newton
   iterates (points sliding over facet edges) made Newton cycle. The wound model therefore
@@ -73,6 +85,8 @@ __all__ = [
     "ContactPairs",
     "ContactSummary",
     "FlankContact",
+    "barycentric_derivatives",
+    "fade_weight",
     "Surface",
     "gap_derivatives",
     "orient_outward",
@@ -103,6 +117,7 @@ class ContactPairs(NamedTuple):
     stiffness: np.ndarray  # (na,) c = w k_V A_q / h, mN/mm
     size_mm: np.ndarray  # (na,) h of the slave facet
     n_deep: int  # points left out because -g > max_depth_mm (0 when all is well)
+    weight: np.ndarray  # (na,) edge fade w in (0, 1]; 1 where the projection is on the facet
 
 
 class ContactSummary(NamedTuple):
@@ -180,12 +195,13 @@ def gap_derivatives(
 
 
 def point_triangle_distance(
-    p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray
+    p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray, with_bary: bool = False
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Exact distance from points to triangles (broadcast over leading axes).
 
     Returns (distance, signed plane distance g = (p - a) . n, smallest barycentric coordinate
-    of the orthogonal projection onto the triangle's plane; >= 0 means inside).
+    of the orthogonal projection onto the triangle's plane; >= 0 means inside). With
+    ``with_bary`` the last item is all three coordinates (..., 3) (for a, b, c).
     """
     e0, e1, v = b - a, c - a, p - a
     nrm = np.cross(e0, e1)
@@ -196,7 +212,8 @@ def point_triangle_distance(
     den = d00 * d11 - d01 * d01
     beta = (d11 * d20 - d01 * d21) / den
     gamma = (d00 * d21 - d01 * d20) / den
-    bary_min = np.minimum(np.minimum(beta, gamma), 1.0 - beta - gamma)
+    lam = np.stack([1.0 - beta - gamma, beta, gamma], axis=-1)
+    bary_min = lam.min(axis=-1)
 
     def seg(q0: np.ndarray, q1: np.ndarray) -> np.ndarray:
         e = q1 - q0
@@ -205,7 +222,70 @@ def point_triangle_distance(
 
     edge = np.minimum(np.minimum(seg(a, b), seg(b, c)), seg(c, a))
     dist = np.where(bary_min >= 0.0, np.abs(g), edge)
+    if with_bary:
+        return dist, g, lam
     return dist, g, bary_min
+
+
+def barycentric_derivatives(
+    xq: np.ndarray, x1: np.ndarray, x2: np.ndarray, x3: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Barycentric coordinates of the orthogonal projection of ``xq`` onto the plane of the
+    triangle (x1, x2, x3) and their exact gradients.
+
+    Inputs (N, 3). Returns lam (N, 3) and dlam/dq (N, 3, 12) with q = (xq, x1, x2, x3).
+    lam_i = A_i . m / (m . m) with A_i = (x_j - xq) x (x_k - xq), (i, j, k) cyclic and
+    m = (x2 - x1) x (x3 - x1) (the component of xq along m drops out of A_i . m).
+    """
+    V = (x1, x2, x3)
+    a0, b0 = x2 - x1, x3 - x1
+    m = np.cross(a0, b0)
+    s = _dot(m, m)
+    Ca0, Cb0 = _cross_matrix(a0), _cross_matrix(b0)
+    dm = (Cb0 - Ca0, -Cb0, Ca0)  # dm/dx1, dm/dx2, dm/dx3, each (N, 3, 3)
+    N = len(xq)
+    lam = np.zeros((N, 3))
+    dlam = np.zeros((N, 3, 12))
+    mT = m[:, None, :]
+    for i, (j, k) in enumerate(((1, 2), (2, 0), (0, 1))):
+        a, b = V[j] - xq, V[k] - xq
+        A = np.cross(a, b)
+        lam[:, i] = _dot(A, m) / s
+        Ca, Cb = _cross_matrix(a), _cross_matrix(b)
+        dA = {0: Cb - Ca, 1 + j: -Cb, 1 + k: Ca}  # dA/d(q block)
+        for blk in range(4):
+            g = np.zeros((N, 3))
+            if blk in dA:
+                g += (mT @ dA[blk])[:, 0, :]  # (dA/dz)^T m
+            if blk >= 1:
+                dmb = dm[blk - 1]
+                g += (A[:, None, :] @ dmb)[:, 0, :] - 2.0 * lam[:, i, None] * (mT @ dmb)[:, 0, :]
+            dlam[:, i, 3 * blk : 3 * blk + 3] = g / s[:, None]
+    return lam, dlam
+
+
+def fade_weight(lam: np.ndarray, width: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Weight w = phi(lam_1) phi(lam_2) phi(lam_3), dw/dlam and d2w/dlam2 ((N, 3) inputs).
+
+    phi(lam) = 1 - 3 t^2 + 2 t^3 with t = clip(-lam / width, 0, 1): 1 on the facet, 0 at
+    ``width`` beyond an edge (in barycentric units), C1 at both ends.
+    """
+    t = np.clip(-lam / width, 0.0, 1.0)
+    band = (t > 0.0) & (t < 1.0)
+    phi = 1.0 - 3.0 * t**2 + 2.0 * t**3
+    d1 = np.where(band, 6.0 * t * (1.0 - t) / width, 0.0)
+    d2 = np.where(band, -(6.0 - 12.0 * t) / width**2, 0.0)
+    w = phi.prod(axis=1)
+    N = len(lam)
+    dw = np.empty((N, 3))
+    d2w = np.empty((N, 3, 3))
+    for i in range(3):
+        j, k = (i + 1) % 3, (i + 2) % 3
+        dw[:, i] = d1[:, i] * phi[:, j] * phi[:, k]
+        d2w[:, i, i] = d2[:, i] * phi[:, j] * phi[:, k]
+        d2w[:, i, j] = d1[:, i] * d1[:, j] * phi[:, k]
+        d2w[:, j, i] = d2w[:, i, j]
+    return w, dw, d2w
 
 
 def _face_keys(tri: np.ndarray, n: int) -> np.ndarray:
@@ -309,7 +389,7 @@ def _contact_points(X: np.ndarray, facets: np.ndarray) -> _Points:
 class _Closest(NamedTuple):
     facet: np.ndarray  # (N,) master facet index (valid where ok)
     gap: np.ndarray  # (N,) signed plane distance to it
-    ok: np.ndarray  # (N,) projection inside, not excluded, flanks facing each other
+    ok: np.ndarray  # (N,) projection inside the facet's fade band, not excluded, facing
 
 
 class _Candidates(NamedTuple):
@@ -322,6 +402,31 @@ class _Candidates(NamedTuple):
     size_mm: np.ndarray  # (nc,)
     engaged: np.ndarray  # (nc,) bool: engaged (g < touch_rel h)
     n_deep: int
+
+
+class _Local(NamedTuple):
+    pairs: ContactPairs
+    dofs: np.ndarray  # (na, 18)
+    grad_g: np.ndarray  # (na, 18) gap gradient
+    grad_w: np.ndarray  # (na, 18) fade weight gradient (0 off the fade bands)
+    hess_g: np.ndarray | None  # (na, 18, 18) gap Hessian
+    hess_w: np.ndarray | None  # (na, 18, 18) fade weight Hessian (None: no point fades)
+
+
+def _expand_hessian(H12: np.ndarray, bary: np.ndarray, linear_q: bool = False) -> np.ndarray:
+    """A Hessian over q = (x_q, x1, x2, x3) (N, 12, 12) mapped to the 18 dofs of the 3 slave and
+    3 master nodes with x_q = sum_i N_i x_si. ``linear_q``: the x_q x_q block is zero."""
+    na = len(H12)
+    H = np.zeros((na, 18, 18))
+    N = bary
+    sm = (N[:, :, None, None] * H12[:, None, 0:3, 3:12]).reshape(na, 9, 9)
+    H[:, 0:9, 9:18] = sm
+    H[:, 9:18, 0:9] = np.transpose(sm, (0, 2, 1))
+    H[:, 9:18, 9:18] = H12[:, 3:12, 3:12]
+    if not linear_q:
+        qq = N[:, :, None, None, None] * N[:, None, None, :, None] * H12[:, None, 0:3, None, 0:3]
+        H[:, 0:9, 0:9] = qq.reshape(na, 9, 9)
+    return H
 
 
 class FlankContact:
@@ -340,21 +445,21 @@ class FlankContact:
         *,
         max_depth_mm: float,
         neighbours: int = 12,
-        bary_tol: float = 0.05,
         normal_cos: float = 0.0,
         touch_rel: float = 1e-9,
         exact_depth_rel: float = np.inf,
         near_rel: float = 1.0,
+        fade_width: float = 0.25,
     ) -> None:
         self.X = np.asarray(X, dtype=float)
         self.n_dofs = 3 * len(self.X)
         a, b = _surface(self.X, np.asarray(left)), _surface(self.X, np.asarray(right))
         self.surfaces = (a, b)
         self.points = (_contact_points(self.X, a.facets), _contact_points(self.X, b.facets))
+        self.fade_width = float(fade_width)
         self.nodes = np.union1d(a.nodes, b.nodes)  # every node whose position matters
         self.max_depth_mm = float(max_depth_mm)
         self.neighbours = int(neighbours)
-        self.bary_tol = float(bary_tol)
         self.normal_cos = float(normal_cos)
         self.touch_rel = float(touch_rel)
         self.exact_depth_rel = float(exact_depth_rel)
@@ -392,13 +497,22 @@ class FlankContact:
         cand = np.asarray(cand).reshape(len(pts), k)
         ct = tri[cand]  # (N, k, 3)
         v = x[ct]
-        dist, g, bmin = point_triangle_distance(
-            pts[:, None, :], v[..., 0, :], v[..., 1, :], v[..., 2, :]
+        dist, g, lam = point_triangle_distance(
+            pts[:, None, :], v[..., 0, :], v[..., 1, :], v[..., 2, :], with_bary=True
         )
         own = np.any(ct[:, :, :, None] == exclude[:, None, None, :], axis=(2, 3))
-        inside = bmin >= -self.bary_tol
-        # Ties on shared edges go to a facet that the projection falls into.
-        score = np.where(own, np.inf, dist + np.where(inside, 0.0, 1e-12 * (1.0 + dist)))
+        # A point stays paired up to fade_width beyond the facet's edges (its weight fading
+        # to 0 there); where the surface goes on, the closest neighbour takes over first.
+        inside = lam.min(axis=2) > -self.fade_width
+        # Prefer the facet that the projection falls into: past the edges between facets the
+        # exact distances tie (distance to the shared edge), the weights do not.
+        w = fade_weight(lam.reshape(-1, 3), self.fade_width)[0].reshape(lam.shape[:2])
+        size = np.sqrt(
+            np.linalg.norm(
+                np.cross(v[..., 1, :] - v[..., 0, :], v[..., 2, :] - v[..., 0, :]), axis=-1
+            )
+        )
+        score = np.where(own, np.inf, dist + (1.0 - w) * size)
         best = np.argmin(score, axis=1)
         r = np.arange(len(pts))
         facet = cand[r, best]
@@ -485,12 +599,14 @@ class FlankContact:
         pm = x[fr.master]
         nrm = np.cross(pm[:, 1] - pm[:, 0], pm[:, 2] - pm[:, 0])
         g = _dot(xq - pm[:, 0], nrm) / np.linalg.norm(nrm, axis=1)
-        self._cand = (g, fr.size_mm, TWO_PASS_WEIGHT * self.k_V_kPa * fr.area_mm2 / fr.size_mm)
-        act = g < self.touch_rel * fr.size_mm if self.frozen else fr.engaged
-        stiff = self._cand[2][act]
+        lam = point_triangle_distance(xq, pm[:, 0], pm[:, 1], pm[:, 2], with_bary=True)[2]
+        w = fade_weight(lam, self.fade_width)[0]
+        stiff_all = TWO_PASS_WEIGHT * self.k_V_kPa * fr.area_mm2 / fr.size_mm
+        self._cand = (g, fr.size_mm, stiff_all, w)
+        act = (g < self.touch_rel * fr.size_mm if self.frozen else fr.engaged) & (w > 0.0)
         out = ContactPairs(
-            fr.carrier[act], fr.bary[act], fr.master[act], g[act], stiff, fr.size_mm[act],
-            fr.n_deep,
+            fr.carrier[act], fr.bary[act], fr.master[act], g[act], stiff_all[act],
+            fr.size_mm[act], fr.n_deep, w[act],
         )  # fmt: skip
         self._cache, self._cache_x, self._cache_key = out, xn.copy(), key
         self.evaluations += 1
@@ -499,60 +615,88 @@ class FlankContact:
 
     # -- energy, forces, tangent ------------------------------------------------------------------
 
-    def _local(
-        self, u: np.ndarray, hessian: bool
-    ) -> tuple[ContactPairs, np.ndarray, np.ndarray, np.ndarray | None]:
-        """Pairs, their 18 dofs (3 slave + 3 master nodes), gradient and Hessian of the gap."""
+    def _local(self, u: np.ndarray, hessian: bool) -> _Local:
+        """Pairs, their 18 dofs (3 slave + 3 master nodes), gradients of the gap and of the fade
+        weight, and the Hessian of the gap."""
         pr = self.pairs(u)
         x = self.positions(u)
         nodes = np.concatenate([pr.slave, pr.master], axis=1)  # (na, 6)
         dofs = (3 * nodes[:, :, None] + np.arange(3)).reshape(-1, 18)
         na = len(pr.gap_mm)
+        grad_w = np.zeros((na, 18))
         if na == 0:
-            return pr, dofs, np.zeros((0, 18)), np.zeros((0, 18, 18)) if hessian else None
+            H0 = np.zeros((0, 18, 18)) if hessian else None
+            return _Local(pr, dofs, np.zeros((0, 18)), grad_w, H0, None)
         xq = np.einsum("qi,qij->qj", pr.bary, x[pr.slave])
-        _, g12, H12 = gap_derivatives(
-            xq, x[pr.master[:, 0]], x[pr.master[:, 1]], x[pr.master[:, 2]], hessian
-        )
-        # x_q = sum_i N_i x_si: d/d(slave node i) = N_i d/dx_q (g is linear in x_q: no qq term).
-        slave_part = (pr.bary[:, :, None] * g12[:, None, 0:3]).reshape(na, 9)
-        grad = np.concatenate([slave_part, g12[:, 3:12]], axis=1)
+        x1, x2, x3 = x[pr.master[:, 0]], x[pr.master[:, 1]], x[pr.master[:, 2]]
+        _, g12, H12 = gap_derivatives(xq, x1, x2, x3, hessian)
+
+        def to18(d12: np.ndarray, bary: np.ndarray) -> np.ndarray:
+            # x_q = sum_i N_i x_si: d/d(slave node i) = N_i d/dx_q.
+            slave = (bary[:, :, None] * d12[:, None, 0:3]).reshape(len(d12), 9)
+            return np.concatenate([slave, d12[:, 3:12]], axis=1)
+
+        grad = to18(g12, pr.bary)
+        fb = np.flatnonzero(pr.weight < 1.0)
+        Hw = None
+        if len(fb):
+            q = np.concatenate([xq[fb], x1[fb], x2[fb], x3[fb]], axis=1)  # (nb, 12)
+            lam, dlam = barycentric_derivatives(q[:, 0:3], q[:, 3:6], q[:, 6:9], q[:, 9:12])
+            _, dw, d2w = fade_weight(lam, self.fade_width)
+            grad_w[fb] = to18(np.einsum("ni,nij->nj", dw, dlam), pr.bary[fb])
+            if hessian:
+                # d2w/dq2 = sum_ij d2w/dlam_i dlam_j dlam_i dlam_j^T + sum_i dw/dlam_i d2lam_i;
+                # d2lam by central differences of the exact dlam (only fade-band points).
+                eps = 1e-6 * pr.size_mm[fb]
+                d2lam = np.empty((len(fb), 3, 12, 12))
+                for c in range(12):
+                    e = np.zeros((len(fb), 12))
+                    e[:, c] = eps
+                    qp, qm = q + e, q - e
+                    dp = barycentric_derivatives(qp[:, 0:3], qp[:, 3:6], qp[:, 6:9], qp[:, 9:12])[1]
+                    dm = barycentric_derivatives(qm[:, 0:3], qm[:, 3:6], qm[:, 6:9], qm[:, 9:12])[1]
+                    d2lam[:, :, :, c] = (dp - dm) / (2.0 * eps[:, None, None])
+                d2lam = 0.5 * (d2lam + np.transpose(d2lam, (0, 1, 3, 2)))
+                H12w = np.einsum("nij,nia,njb->nab", d2w, dlam, dlam)
+                H12w += np.einsum("ni,niab->nab", dw, d2lam)
+                Hw = np.zeros((na, 18, 18))
+                Hw[fb] = _expand_hessian(H12w, pr.bary[fb])
         if not hessian:
-            return pr, dofs, grad, None
+            return _Local(pr, dofs, grad, grad_w, None, None)
         assert H12 is not None
-        H = np.zeros((na, 18, 18))
-        Hqm = H12[:, 0:3, 3:12]  # (na, 3, 9)
-        sm = pr.bary[:, :, None, None] * Hqm[:, None, :, :]  # (na, 3 slave nodes, 3, 9)
-        sm = sm.reshape(na, 9, 9)
-        H[:, 0:9, 9:18] = sm
-        H[:, 9:18, 0:9] = np.transpose(sm, (0, 2, 1))
-        H[:, 9:18, 9:18] = H12[:, 3:12, 3:12]
-        return pr, dofs, grad, H
+        return _Local(pr, dofs, grad, grad_w, _expand_hessian(H12, pr.bary, linear_q=True), Hw)
 
     def energy(self, u: np.ndarray) -> float:
         """Penalty energy (mN mm) at ``u``."""
         pr = self.pairs(u)
-        return float(0.5 * np.sum(pr.stiffness * pr.gap_mm**2))
+        return float(0.5 * np.sum(pr.stiffness * pr.weight * pr.gap_mm**2))
 
     def force_vector(self, u: np.ndarray) -> np.ndarray:
         """Contact contribution to the residual, dPi_c/du (flat, mN)."""
-        pr, dofs, grad, _ = self._local(u, hessian=False)
+        lo = self._local(u, hessian=False)
+        pr = lo.pairs
         t0 = time.perf_counter()
-        w = (pr.stiffness * pr.gap_mm)[:, None] * grad
-        out = np.bincount(dofs.ravel(), weights=w.ravel(), minlength=self.n_dofs)
+        c, g = pr.stiffness[:, None], pr.gap_mm[:, None]
+        f = c * pr.weight[:, None] * g * lo.grad_g + 0.5 * c * g**2 * lo.grad_w
+        out = np.bincount(lo.dofs.ravel(), weights=f.ravel(), minlength=self.n_dofs)
         self.assembly_time_s += time.perf_counter() - t0
         return out
 
     def tangent_coo(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Contact tangent d2Pi_c/du2 as COO triplets (rows, cols, values; duplicates add)."""
-        pr, dofs, grad, H = self._local(u, hessian=True)
+        lo = self._local(u, hessian=True)
+        pr, dofs, grad, gw, H, Hw = lo
         t0 = time.perf_counter()
         assert H is not None
         c = pr.stiffness[:, None, None]
+        w = pr.weight[:, None, None]
         # The geometric term, unless dropped beyond exact_depth_rel (module docstring).
-        g = pr.gap_mm
-        g = np.where(np.abs(g) <= self.exact_depth_rel * pr.size_mm, g, 0.0)[:, None, None]
-        K = c * (grad[:, :, None] * grad[:, None, :] + g * H)
+        g0 = pr.gap_mm[:, None, None]
+        g = np.where(np.abs(pr.gap_mm) <= self.exact_depth_rel * pr.size_mm, pr.gap_mm, 0.0)
+        K = c * w * (grad[:, :, None] * grad[:, None, :] + g[:, None, None] * H)
+        K += c * g0 * (grad[:, :, None] * gw[:, None, :] + gw[:, :, None] * grad[:, None, :])
+        if Hw is not None:
+            K += 0.5 * c * g0**2 * Hw
         rows = np.repeat(dofs, 18, axis=1).ravel()
         cols = np.tile(dofs, (1, 18)).ravel()
         self.assembly_time_s += time.perf_counter() - t0
@@ -604,18 +748,22 @@ class FlankContact:
 
     def summary(self, u: np.ndarray) -> ContactSummary:
         """Penetration and compressive normal force of the state ``u`` at the current
-        ``k_V_kPa``, over all contact candidates at ``u``."""
+        ``k_V_kPa``, over all contact candidates at ``u``. Penetration counts only points whose
+        projection lies on their master facet (weight 1): in a fade band the point is past the
+        facet's edge, where its plane is no longer the body's surface."""
         pr = self.pairs(u)
-        g, size, stiff = self._cand
+        g, size, stiff, w = self._cand
         depth = np.maximum(-g, 0.0)
+        force = float(np.sum(stiff * w * depth))
+        depth = np.where(w >= 1.0, depth, 0.0)
         pen = depth > 0.0
         if not pen.any():
-            return ContactSummary(0, 0.0, 0.0, 0.0, pr.n_deep)
+            return ContactSummary(0, 0.0, 0.0, force, pr.n_deep)
         return ContactSummary(
             int(pen.sum()),
             float(depth.max()),
             float(np.max(depth / size)),
-            float(np.sum(stiff * depth)),
+            force,
             pr.n_deep,
         )
 

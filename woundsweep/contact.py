@@ -489,8 +489,10 @@ class FlankContact:
         exclude: np.ndarray,
         master: Surface,
     ) -> _Closest:
-        """Master facet of each point: nearest (exact distance) among the ``neighbours`` facets
-        with the nearest centroids, skipping facets that share a node with ``exclude`` (N, j)."""
+        """Master facet of each point: the best valid one (score: exact distance, plus the fade
+        deficit times the facet size) among the ``neighbours`` facets with the nearest centroids.
+        Valid: no node shared with ``exclude`` (N, j), facing the point's facet, projection
+        inside the fade band."""
         tri = master.facets
         k = min(self.neighbours, len(tri))
         _, cand = cKDTree(x[tri].mean(axis=1)).query(pts, k=k)
@@ -501,26 +503,22 @@ class FlankContact:
             pts[:, None, :], v[..., 0, :], v[..., 1, :], v[..., 2, :], with_bary=True
         )
         own = np.any(ct[:, :, :, None] == exclude[:, None, None, :], axis=(2, 3))
+        m = np.cross(v[..., 1, :] - v[..., 0, :], v[..., 2, :] - v[..., 0, :])
+        mu = np.linalg.norm(m, axis=-1)
+        facing = np.einsum("ni,nki->nk", normals, m) <= self.normal_cos * mu
         # A point stays paired up to fade_width beyond the facet's edges (its weight fading
-        # to 0 there); where the surface goes on, the closest neighbour takes over first.
-        inside = lam.min(axis=2) > -self.fade_width
+        # to 0 there); where the surface goes on, a neighbour takes over first. Only valid
+        # facets compete, so a point is dropped only when none is left (a closest facet that
+        # is not valid must not hide a valid one behind it: that made pairings flip).
+        valid = ~own & facing & (lam.min(axis=2) > -self.fade_width)
         # Prefer the facet that the projection falls into: past the edges between facets the
         # exact distances tie (distance to the shared edge), the weights do not.
         w = fade_weight(lam.reshape(-1, 3), self.fade_width)[0].reshape(lam.shape[:2])
-        size = np.sqrt(
-            np.linalg.norm(
-                np.cross(v[..., 1, :] - v[..., 0, :], v[..., 2, :] - v[..., 0, :]), axis=-1
-            )
-        )
-        score = np.where(own, np.inf, dist + (1.0 - w) * size)
+        score = np.where(valid, dist + (1.0 - w) * np.sqrt(mu), np.inf)
         best = np.argmin(score, axis=1)
         r = np.arange(len(pts))
         facet = cand[r, best]
-        pm = x[tri[facet]]
-        n_m = np.cross(pm[:, 1] - pm[:, 0], pm[:, 2] - pm[:, 0])
-        n_m /= np.linalg.norm(n_m, axis=1, keepdims=True)
-        facing = _dot(normals, n_m) <= self.normal_cos
-        ok = inside[r, best] & ~own[r, best] & facing
+        ok = valid[r, best]
         return _Closest(facet, g[r, best], ok)
 
     def _detect_one(self, x: np.ndarray, side: int) -> _Candidates:

@@ -136,6 +136,7 @@ DEFAULTS: dict[str, Any] = {
         "residual_growth": 4.0,
         "divergence_factor": 1e6,
         "contact_rtol": 1e-6,
+        "contact_residual_growth": 1.0,
     },
     "analysis": {
         "quantiles": 8,

@@ -136,7 +136,6 @@ DEFAULTS: dict[str, Any] = {
         "residual_growth": 4.0,
         "divergence_factor": 1e6,
         "contact_rtol": 1e-6,
-        "contact_residual_growth": 1.0,
     },
     "analysis": {
         "quantiles": 8,

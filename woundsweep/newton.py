@@ -88,11 +88,6 @@ class NewtonSettings:
     # contact point that changes its master facet moves the forces by a small jump), and
     # below the size of such jumps Newton can only cycle.
     contact_rtol: float = 1e-6
-    # Largest accepted residual growth of one relaxed update in the contact stages. The
-    # contact residual has kinks (engagement at g = 0, pairings refreshed between solves);
-    # accepting growth there let Newton wander (a 45-degree soft cylinder: load 0.26 reached
-    # with 4, 0.986 with 1).
-    contact_residual_growth: float = 1.0
 
     @classmethod
     def from_mapping(cls, values: Mapping[str, Any] | None) -> NewtonSettings:

@@ -674,9 +674,7 @@ class WoundModel:
         self.newton.scale_from_residual = False
         settings = self.newton.settings
         self.newton.settings = dataclasses.replace(
-            settings,
-            rtol=max(settings.rtol, settings.contact_rtol),
-            residual_growth=settings.contact_residual_growth,
+            settings, rtol=max(settings.rtol, settings.contact_rtol)
         )
         try:
             decades = np.log10(k_to / k_from)

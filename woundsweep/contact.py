@@ -16,21 +16,21 @@ configuration. Units: lengths mm, k_V kPa (1 GPa = 1e6 kPa), forces mN, energy m
   flank, g = (x_q - x_1) . n with n = (x_2 - x_1) x (x_3 - x_1) / |...| the deformed unit
   normal; g < 0 means that the point is behind the master surface: -g is its depth in the
   master body, measured normal to the master surface (the "material depth").
-- Pairing: the master facet of a point is the closest one (exact point-triangle distance)
-  among the ``neighbours`` facets with the nearest deformed centroids (scipy cKDTree; facets
-  sharing a node with the point's own facet are skipped). Two modes: live (default; searched
-  afresh at every new state, the residual is a function of u alone) and frozen (`freeze`:
-  the pairing of one state is kept, only engagement follows the state; used by the wound
-  model, see Linearisation). Among the candidates the one the projection falls into wins
-  (score: distance + (1 - phi) * facet size, phi the edge fade below): past the edge between
-  two facets the exact distances tie, the fades do not. The point is engaged when
-  g < touch_rel * h_q (touching counts; ``touch_rel`` = 1e-9), its fade phi > 0 (the
-  orthogonal projection of x_q lies less than ``fade_width`` = 0.25 in barycentric units
-  beyond the facet's edges), the flanks face each other there
-  (n_q . n <= normal_cos, n_q the deformed normal of the slave facet: this keeps the two
-  flanks of a smooth wound bottom, which are continuous and coplanar there, from being taken
-  for penetration), and the depth -g <= max_depth_mm (deeper points are counted as
-  ``n_deep`` and carry no force; the wound model uses the wound depth).
+- Pairing: the master facet of a point is chosen among the ``neighbours`` facets with the
+  nearest deformed centroids (scipy cKDTree) that are valid for it: no node shared with the
+  point's own facet, facing it (n_q . n <= normal_cos, n_q the deformed normal of the slave
+  facet: this keeps the two flanks of a smooth wound bottom, which are continuous and
+  coplanar there, from being taken for penetration), and the orthogonal projection of x_q
+  less than ``fade_width`` = 0.25 (barycentric units) beyond the facet's edges. The valid
+  facet with the smallest score wins: exact point-triangle distance + (1 - phi) * facet size,
+  phi the edge fade below (past the edge between two facets the distances tie, the fades do
+  not). Only valid facets compete: an invalid closest facet hiding a valid one made pairings
+  flip. Two modes: live (default; searched afresh at every new state, the residual is a
+  function of u alone) and frozen (`freeze`: the pairing of one state is kept, only
+  engagement and fades follow the state; used by the wound model, see Linearisation). The
+  point is engaged when g < touch_rel * h_q (touching counts; ``touch_rel`` = 1e-9), phi > 0
+  and the depth -g <= max_depth_mm (deeper points are counted as ``n_deep`` and carry no
+  force; the wound model uses the wound depth).
 - Edge fade. A point whose projection leaves its master facet across an edge where no other
   facet takes over (the rim of a flank, the line where the flanks meet, facets skipped as
   the point's own neighbours) used to drop out of contact with its whole force at once, and
@@ -215,13 +215,18 @@ def point_triangle_distance(
     lam = np.stack([1.0 - beta - gamma, beta, gamma], axis=-1)
     bary_min = lam.min(axis=-1)
 
-    def seg(q0: np.ndarray, q1: np.ndarray) -> np.ndarray:
-        e = q1 - q0
-        t = np.clip(_dot(p - q0, e) / _dot(e, e), 0.0, 1.0)
-        return np.linalg.norm(p - q0 - t[..., None] * e, axis=-1)
+    dist = np.abs(g)
+    out = bary_min < 0.0
+    if out.any():  # projection outside: the distance is to the nearest edge
+        shape = out.shape
+        pp, aa, bb, cc = (np.broadcast_to(z, (*shape, 3))[out] for z in (p, a, b, c))
 
-    edge = np.minimum(np.minimum(seg(a, b), seg(b, c)), seg(c, a))
-    dist = np.where(bary_min >= 0.0, np.abs(g), edge)
+        def seg(q0: np.ndarray, q1: np.ndarray) -> np.ndarray:
+            e = q1 - q0
+            t = np.clip(_dot(pp - q0, e) / _dot(e, e), 0.0, 1.0)
+            return np.linalg.norm(pp - q0 - t[..., None] * e, axis=-1)
+
+        dist[out] = np.minimum(np.minimum(seg(aa, bb), seg(bb, cc)), seg(cc, aa))
     if with_bary:
         return dist, g, lam
     return dist, g, bary_min
@@ -513,8 +518,10 @@ class FlankContact:
         valid = ~own & facing & (lam.min(axis=2) > -self.fade_width)
         # Prefer the facet that the projection falls into: past the edges between facets the
         # exact distances tie (distance to the shared edge), the weights do not.
-        w = fade_weight(lam.reshape(-1, 3), self.fade_width)[0].reshape(lam.shape[:2])
-        score = np.where(valid, dist + (1.0 - w) * np.sqrt(mu), np.inf)
+        deficit = np.zeros(lam.shape[:2])
+        fading = valid & (lam.min(axis=2) < 0.0)
+        deficit[fading] = 1.0 - fade_weight(lam[fading], self.fade_width)[0]
+        score = np.where(valid, dist + deficit * np.sqrt(mu), np.inf)
         best = np.argmin(score, axis=1)
         r = np.arange(len(pts))
         facet = cand[r, best]

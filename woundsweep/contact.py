@@ -52,9 +52,9 @@ configuration. Units: lengths mm, k_V kPa (1 GPa = 1e6 kPa), forces mN, energy m
   + g^2 / 2 d2phi/dq2) over the coordinates of the slave facet's and the master facet's
   nodes, for a given pairing: g, dg, d2g and dlam analytic (`gap_derivatives`,
   `barycentric_derivatives`), d2lam by central differences of dlam (only for the few points
-  with phi < 1; agrees with finite differences of the force to 1e-6 in the tests); ``exact_depth_rel`` can drop the geometric term
-  g d2g/dq2 where |g| > exact_depth_rel h (a quasi-Newton option, off by default). The
-  pairing itself is piecewise constant in u, and a live pairing that changes between Newton
+  with phi < 1; agrees with finite differences of the force to 1e-6 in the tests).
+  ``exact_depth_rel`` can drop the geometric term g d2g/dq2 where |g| > exact_depth_rel h
+  (a quasi-Newton option, off by default). The pairing itself is piecewise constant in u, and a live pairing that changes between Newton
   iterates (points sliding over facet edges) made Newton cycle. The wound model therefore
   solves each load increment with the pairing frozen (a smooth problem apart from the
   engagement kink at g = 0) and, once Newton has converged, re-searches it (`refresh`): if
@@ -85,9 +85,9 @@ __all__ = [
     "ContactPairs",
     "ContactSummary",
     "FlankContact",
+    "Surface",
     "barycentric_derivatives",
     "fade_weight",
-    "Surface",
     "gap_derivatives",
     "orient_outward",
     "owning_cells",
@@ -194,6 +194,22 @@ def gap_derivatives(
     return g, grad, H
 
 
+def _projection(
+    p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Signed plane distance g = (p - a) . n and the barycentric coordinates (..., 3) (for a, b,
+    c) of the orthogonal projection of p onto the triangle's plane (broadcast)."""
+    e0, e1, v = b - a, c - a, p - a
+    nrm = np.cross(e0, e1)
+    nrm = nrm / np.linalg.norm(nrm, axis=-1, keepdims=True)
+    d00, d01, d11 = _dot(e0, e0), _dot(e0, e1), _dot(e1, e1)
+    d20, d21 = _dot(v, e0), _dot(v, e1)
+    den = d00 * d11 - d01 * d01
+    beta = (d11 * d20 - d01 * d21) / den
+    gamma = (d00 * d21 - d01 * d20) / den
+    return _dot(v, nrm), np.stack([1.0 - beta - gamma, beta, gamma], axis=-1)
+
+
 def point_triangle_distance(
     p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray, with_bary: bool = False
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -203,16 +219,7 @@ def point_triangle_distance(
     of the orthogonal projection onto the triangle's plane; >= 0 means inside). With
     ``with_bary`` the last item is all three coordinates (..., 3) (for a, b, c).
     """
-    e0, e1, v = b - a, c - a, p - a
-    nrm = np.cross(e0, e1)
-    nrm = nrm / np.linalg.norm(nrm, axis=-1, keepdims=True)
-    g = _dot(v, nrm)
-    d00, d01, d11 = _dot(e0, e0), _dot(e0, e1), _dot(e1, e1)
-    d20, d21 = _dot(v, e0), _dot(v, e1)
-    den = d00 * d11 - d01 * d01
-    beta = (d11 * d20 - d01 * d21) / den
-    gamma = (d00 * d21 - d01 * d20) / den
-    lam = np.stack([1.0 - beta - gamma, beta, gamma], axis=-1)
+    g, lam = _projection(p, a, b, c)
     bary_min = lam.min(axis=-1)
 
     dist = np.abs(g)
@@ -515,11 +522,12 @@ class FlankContact:
         # to 0 there); where the surface goes on, a neighbour takes over first. Only valid
         # facets compete, so a point is dropped only when none is left (a closest facet that
         # is not valid must not hide a valid one behind it: that made pairings flip).
-        valid = ~own & facing & (lam.min(axis=2) > -self.fade_width)
+        lam_min = lam.min(axis=2)
+        valid = ~own & facing & (lam_min > -self.fade_width)
         # Prefer the facet that the projection falls into: past the edges between facets the
         # exact distances tie (distance to the shared edge), the weights do not.
         deficit = np.zeros(lam.shape[:2])
-        fading = valid & (lam.min(axis=2) < 0.0)
+        fading = valid & (lam_min < 0.0)
         deficit[fading] = 1.0 - fade_weight(lam[fading], self.fade_width)[0]
         score = np.where(valid, dist + deficit * np.sqrt(mu), np.inf)
         best = np.argmin(score, axis=1)
@@ -602,9 +610,7 @@ class FlankContact:
         t0 = time.perf_counter()
         xq = np.einsum("qi,qij->qj", fr.bary, x[fr.carrier])
         pm = x[fr.master]
-        nrm = np.cross(pm[:, 1] - pm[:, 0], pm[:, 2] - pm[:, 0])
-        g = _dot(xq - pm[:, 0], nrm) / np.linalg.norm(nrm, axis=1)
-        lam = point_triangle_distance(xq, pm[:, 0], pm[:, 1], pm[:, 2], with_bary=True)[2]
+        g, lam = _projection(xq, pm[:, 0], pm[:, 1], pm[:, 2])
         w = fade_weight(lam, self.fade_width)[0]
         stiff_all = TWO_PASS_WEIGHT * self.k_V_kPa * fr.area_mm2 / fr.size_mm
         self._cand = (g, fr.size_mm, stiff_all, w)

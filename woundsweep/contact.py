@@ -221,22 +221,25 @@ def point_triangle_distance(
     """
     g, lam = _projection(p, a, b, c)
     bary_min = lam.min(axis=-1)
-
     dist = np.abs(g)
     out = bary_min < 0.0
     if out.any():  # projection outside: the distance is to the nearest edge
         shape = out.shape
-        pp, aa, bb, cc = (np.broadcast_to(z, (*shape, 3))[out] for z in (p, a, b, c))
-
-        def seg(q0: np.ndarray, q1: np.ndarray) -> np.ndarray:
-            e = q1 - q0
-            t = np.clip(_dot(pp - q0, e) / _dot(e, e), 0.0, 1.0)
-            return np.linalg.norm(pp - q0 - t[..., None] * e, axis=-1)
-
-        dist[out] = np.minimum(np.minimum(seg(aa, bb), seg(bb, cc)), seg(cc, aa))
+        dist[out] = _edge_distance(*(np.broadcast_to(z, (*shape, 3))[out] for z in (p, a, b, c)))
     if with_bary:
         return dist, g, lam
     return dist, g, bary_min
+
+
+def _edge_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """Distance from points to the nearest edge of triangles ((N, 3) each)."""
+
+    def seg(q0: np.ndarray, q1: np.ndarray) -> np.ndarray:
+        e = q1 - q0
+        t = np.clip(_dot(p - q0, e) / _dot(e, e), 0.0, 1.0)
+        return np.linalg.norm(p - q0 - t[..., None] * e, axis=-1)
+
+    return np.minimum(np.minimum(seg(a, b), seg(b, c)), seg(c, a))
 
 
 def barycentric_derivatives(
@@ -468,6 +471,11 @@ class FlankContact:
         a, b = _surface(self.X, np.asarray(left)), _surface(self.X, np.asarray(right))
         self.surfaces = (a, b)
         self.points = (_contact_points(self.X, a.facets), _contact_points(self.X, b.facets))
+        # Points whose facet has a node on the other surface (where the flanks meet): only
+        # they can have a master candidate that is excluded as their own neighbour.
+        self._shares = tuple(
+            np.isin(self.points[i].carrier, self.surfaces[1 - i].nodes).any(axis=1) for i in (0, 1)
+        )
         self.fade_width = float(fade_width)
         self.nodes = np.union1d(a.nodes, b.nodes)  # every node whose position matters
         self.max_depth_mm = float(max_depth_mm)
@@ -500,22 +508,25 @@ class FlankContact:
         normals: np.ndarray,
         exclude: np.ndarray,
         master: Surface,
+        shares: np.ndarray | None = None,
     ) -> _Closest:
         """Master facet of each point: the best valid one (score: exact distance, plus the fade
         deficit times the facet size) among the ``neighbours`` facets with the nearest centroids.
         Valid: no node shared with ``exclude`` (N, j), facing the point's facet, projection
-        inside the fade band."""
+        inside the fade band. ``shares`` (N,) marks the points whose ``exclude`` nodes are on
+        the master surface at all (the others cannot share a node: their check is skipped)."""
         tri = master.facets
         k = min(self.neighbours, len(tri))
         _, cand = cKDTree(x[tri].mean(axis=1)).query(pts, k=k)
         cand = np.asarray(cand).reshape(len(pts), k)
         ct = tri[cand]  # (N, k, 3)
         v = x[ct]
-        dist, g, lam = point_triangle_distance(
-            pts[:, None, :], v[..., 0, :], v[..., 1, :], v[..., 2, :], with_bary=True
-        )
-        own = np.any(ct[:, :, :, None] == exclude[:, None, None, :], axis=(2, 3))
-        m = np.cross(v[..., 1, :] - v[..., 0, :], v[..., 2, :] - v[..., 0, :])
+        v0, v1, v2 = v[..., 0, :], v[..., 1, :], v[..., 2, :]
+        g, lam = _projection(pts[:, None, :], v0, v1, v2)
+        own = np.zeros(cand.shape, dtype=bool)
+        rows = np.arange(len(pts)) if shares is None else np.flatnonzero(shares)
+        own[rows] = np.any(ct[rows, :, :, None] == exclude[rows, None, None, :], axis=(2, 3))
+        m = np.cross(v1 - v0, v2 - v0)
         mu = np.linalg.norm(m, axis=-1)
         facing = np.einsum("ni,nki->nk", normals, m) <= self.normal_cos * mu
         # A point stays paired up to fade_width beyond the facet's edges (its weight fading
@@ -524,10 +535,16 @@ class FlankContact:
         # is not valid must not hide a valid one behind it: that made pairings flip).
         lam_min = lam.min(axis=2)
         valid = ~own & facing & (lam_min > -self.fade_width)
+        # Exact distance: |g| where the projection is on the facet, else to the nearest edge,
+        # computed for valid candidates only (most of the k are far outside their facet).
+        dist = np.abs(g)
+        fading = valid & (lam_min < 0.0)
+        if fading.any():
+            pp = np.broadcast_to(pts[:, None, :], v0.shape)[fading]
+            dist[fading] = _edge_distance(pp, v0[fading], v1[fading], v2[fading])
         # Prefer the facet that the projection falls into: past the edges between facets the
         # exact distances tie (distance to the shared edge), the weights do not.
         deficit = np.zeros(lam.shape[:2])
-        fading = valid & (lam_min < 0.0)
         deficit[fading] = 1.0 - fade_weight(lam[fading], self.fade_width)[0]
         score = np.where(valid, dist + deficit * np.sqrt(mu), np.inf)
         best = np.argmin(score, axis=1)
@@ -545,7 +562,7 @@ class FlankContact:
         p = x[sl.facets]
         normals = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])[qp.facet]
         normals /= np.linalg.norm(normals, axis=1, keepdims=True)
-        cl = self._closest(x, pts, normals, sf, ms)
+        cl = self._closest(x, pts, normals, sf, ms, self._shares[side])
         cand = cl.ok & (cl.gap < self.near_rel * qp.size_mm)
         deep = cand & (-cl.gap > self.max_depth_mm)
         keep = cand & ~deep

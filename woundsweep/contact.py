@@ -508,7 +508,7 @@ class FlankContact:
         normals: np.ndarray,
         exclude: np.ndarray,
         master: Surface,
-        shares: np.ndarray | None = None,
+        shares: np.ndarray,
     ) -> _Closest:
         """Master facet of each point: the best valid one (score: exact distance, plus the fade
         deficit times the facet size) among the ``neighbours`` facets with the nearest centroids.
@@ -524,7 +524,7 @@ class FlankContact:
         v0, v1, v2 = v[..., 0, :], v[..., 1, :], v[..., 2, :]
         g, lam = _projection(pts[:, None, :], v0, v1, v2)
         own = np.zeros(cand.shape, dtype=bool)
-        rows = np.arange(len(pts)) if shares is None else np.flatnonzero(shares)
+        rows = np.flatnonzero(shares)
         own[rows] = np.any(ct[rows, :, :, None] == exclude[rows, None, None, :], axis=(2, 3))
         m = np.cross(v1 - v0, v2 - v0)
         mu = np.linalg.norm(m, axis=-1)

@@ -1,4 +1,4 @@
-"""Cost of one contact pair search against one residual assembly (woundsweep.contact).
+"""Cost of one contact search against one residual assembly (woundsweep.contact, .depth).
 
 Usage::
 
@@ -10,7 +10,9 @@ dropped before each), one contact evaluation of a frozen pairing (gaps, fades, f
 one assembly of the finite-element residual. Prints the contact points, the candidates found
 and the ratio search / residual: the contact stages search once per load increment and once
 per refresh, so this ratio and the number of searches set the detection share of a stage
-(target < 20 %, reported per stage by bench_solver.py). Compare figures within one run.
+(target < 20 %, reported per stage by bench_solver.py). The material-depth model
+(``stages.contact_model: depth``) locates every point at every residual; its point location
+and its tangent are timed at the same state. Compare figures within one run.
 """
 
 from __future__ import annotations
@@ -47,7 +49,8 @@ def main() -> int:
 
     # Same geometry as bench_solver.py's "mid-size" job.
     T = 2.0
-    model = WoundModel(build_mesh(GeometrySpec.wedge(1.0, 1.0, 2 * T, 0.3 * 2 * T, 0.5 * T, 0.5)))
+    mesh = build_mesh(GeometrySpec.wedge(1.0, 1.0, 2 * T, 0.3 * 2 * T, 0.5 * T, 0.5))
+    model = WoundModel(mesh)
     model.set_materials(JobMaterials.table2("soft", 90.0))
     for k in range(1, 5):
         out = model.run_stage(k)
@@ -82,6 +85,23 @@ def main() -> int:
     print(f"contact forces, frozen pairing {t_eval:7.1f} ms")
     print(f"residual assembly (FEM)        {t_res:7.1f} ms")
     print(f"search / residual              {t_search / t_res:7.1f}")
+
+    # The material-depth model at the same state (same mesh, so the same node numbering).
+    d = WoundModel(mesh, contact_model="depth").contact
+    assert d is not None
+    d.k_V_kPa = c.k_V_kPa
+
+    def locate() -> None:
+        d._cache = None
+        d.state(u)
+
+    t_loc = _median_ms(locate)
+    n_eng = len(d.state(u).depth)
+    t_tan = _median_ms(lambda: d.tangent_coo(u), repeat=5)
+    print(f"depth model: {[len(r.cells) for r in d.regions]} master cells, {n_eng} points engaged")
+    print(f"point location (both passes)   {t_loc:7.1f} ms")
+    print(f"contact tangent                {t_tan:7.1f} ms")
+    print(f"location / residual            {t_loc / t_res:7.1f}")
     return 0
 
 

@@ -100,6 +100,10 @@ BAD = {
         lambda p: _mutate(p, lambda d: d.update(stages={"contact_penalty_GPa": "high"})),
         "stages.contact_penalty_GPa",
     ),
+    "unknown-contact-model": (
+        lambda p: _mutate(p, lambda d: d.update(stages={"contact_model": "magic"})),
+        "stages.contact_model",
+    ),
     "empty-axis": (
         lambda p: _mutate(p, lambda d: d["grid"].update(mesh_size_factor=[])),
         "grid.mesh_size_factor",

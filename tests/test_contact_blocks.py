@@ -31,6 +31,7 @@ import pytest
 from box_mesh import boundary_facets, box_tets
 
 from woundsweep.contact import GPA_TO_KPA, ContactSummary, FlankContact, orient_outward
+from woundsweep.depth import DepthContact
 from woundsweep.materials import Fung, first_piola
 
 pytestmark = pytest.mark.fem
@@ -59,7 +60,9 @@ def uniaxial_state(material: Fung, p: float) -> tuple[float, float]:
 class Blocks:
     """The two-block problem; implements `woundsweep.newton.NonlinearProblem`."""
 
-    def __init__(self, n: int, material: Fung, p: float, n_right: int | None = None) -> None:
+    def __init__(
+        self, n: int, material: Fung, p: float, n_right: int | None = None, model: str = "surface"
+    ) -> None:
         import dolfinx.fem
         import ufl
 
@@ -122,7 +125,14 @@ class Blocks:
         # Contact: the two x = 0 faces in node numbering, oriented out of their blocks.
         left = orient_outward(X, self.cell_nodes, input_node[left_wall])
         right = orient_outward(X, self.cell_nodes, input_node[right_wall])
-        self.contact = FlankContact(X, left, right, max_depth_mm=0.5 / max(n, m))
+        depth = 0.5 / max(n, m)
+        self.contact: Any
+        if model == "surface":
+            self.contact = FlankContact(X, left, right, max_depth_mm=depth)
+        else:
+            side = self.in_right[self.cell_nodes].all(axis=1)
+            surface = np.vstack([left, right])
+            self.contact = DepthContact(X, self.cell_nodes, side, surface, max_depth_mm=depth)
 
     # -- NonlinearProblem ---------------------------------------------------------------------
 
@@ -165,22 +175,23 @@ class Run(NamedTuple):
 
 
 @functools.cache
-def solve_blocks(n_right: int) -> dict[str, Any]:
+def solve_blocks(n_right: int, model: str = "surface") -> dict[str, Any]:
     """Solve the load at k_V = 1 GPa (load continuation from the touching state), then 5 and
-    100 GPa from the previous state. R has ``n_right``^2 grid boxes across x = 0."""
+    100 GPa from the previous state. R has ``n_right``^2 grid boxes across x = 0; ``model``
+    is "surface" (`FlankContact`) or "depth" (`DepthContact`)."""
     import ufl
 
     from woundsweep.newton import LoadState, NewtonSettings, NewtonSolver, continuation
 
     material = dataclasses.replace(Fung.normal(0.0), a1=ufl.as_vector((1.0, 0.0, 0.0)))
     t0 = time.perf_counter()
-    prob = Blocks(N_BOX, material, PRESSURE_KPA, n_right=n_right)
+    prob = Blocks(N_BOX, material, PRESSURE_KPA, n_right=n_right, model=model)
     t_build = time.perf_counter() - t0
     u = prob.u.x.array
     # The start: the faces touch (g = 0 < touch_rel h), so every contact point is engaged and
     # R's rigid motion in x is restrained from the first Newton step on.
     prob.contact.k_V_kPa = K_V_GPA[0] * GPA_TO_KPA
-    start = prob.contact.pairs(u)
+    start = prob.contact.pairs(u) if model == "surface" else prob.contact.state(u)
     newton = NewtonSolver(prob, prob.A, NewtonSettings())
     zeros = np.zeros(len(prob.rows))
     scale = float(np.linalg.norm(prob.f_ext))
@@ -201,7 +212,7 @@ def solve_blocks(n_right: int) -> dict[str, Any]:
         prob.residual(b)
         reaction = float(b.getArray(readonly=True)[wall_x].sum())
         runs[k] = Run(status, its, prob.contact.summary(u), u.copy(), reaction, dt)
-    name = "matching" if n_right == N_BOX else "non-matching"
+    name = ("matching" if n_right == N_BOX else "non-matching") + f" ({model})"
     print(f"\n{name}: build (mesh, JIT, contact setup) {t_build:.1f} s")
     for k, run in runs.items():
         s = run.summary

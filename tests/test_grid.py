@@ -10,6 +10,7 @@ import pandas as pd
 import pytest
 import yaml
 
+from woundsweep.errors import SweepError
 from woundsweep.grid import MANIFEST_COLUMNS, expand, load_sweep, parse_sweep
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -145,5 +146,16 @@ def test_settings_defaults_are_table_2() -> None:
     assert stiff["c_kPa"] == 42.6 and stiff["tsf"] == 1.05 and stiff["mu_kPa"] == [35.6, 11.8, 11.8]
     assert s.materials["subcutis"] == {"C10_kPa": 0.4, "C20_kPa": 1.4, "K_kPa": 50.0}
     assert s.stages["contact_penalty_GPa"] == [1.0, 5.0, 100.0]
+    assert s.stages["contact_model"] == "surface"
     # The paper file spells out the same values as the defaults.
     assert load_sweep(PAPER).materials == s.materials
+    assert load_sweep(PAPER).stages == s.stages
+
+
+def test_contact_model_setting() -> None:
+    data = yaml.safe_load(Path(DEMO).read_text())
+    data["stages"] = {"contact_model": "depth"}
+    assert parse_sweep(data).stages["contact_model"] == "depth"
+    data["stages"] = {"contact_model": 3}
+    with pytest.raises(SweepError, match="stages.contact_model"):
+        parse_sweep(data)

@@ -40,19 +40,22 @@ def _flank_nodes(m) -> tuple[np.ndarray, np.ndarray]:
     return left.nodes, right.nodes
 
 
-def _run(mesh, angle: float, skin: str = "stiff"):
+def _run(mesh, angle: float, skin: str = "stiff", model: str = "surface"):
     from woundsweep.stages import JobMaterials, WoundModel
 
-    m = WoundModel(mesh)
+    m = WoundModel(mesh, contact_model=model)
     m.set_materials(JobMaterials.table2(skin, angle))
     outs = [m.run_stage(k) for k in range(1, 7)]
     return m, outs
 
 
+@pytest.mark.parametrize("model", ["surface", "depth"])
 @pytest.mark.parametrize("which", ["cylinder", "wedge"])
-def test_contact_stages_close_the_wound_without_overlap(which, cylinder_mesh, wedge_mesh) -> None:
+def test_contact_stages_close_the_wound_without_overlap(
+    which, model, cylinder_mesh, wedge_mesh
+) -> None:
     mesh = cylinder_mesh if which == "cylinder" else wedge_mesh
-    m, outs = _run(mesh, 0.0)
+    m, outs = _run(mesh, 0.0, model=model)
     assert [o.solve.status for o in outs] == [CONVERGED] * 6
     d3 = outs[2].diagnostics
     d4, d5, d6 = (o.diagnostics for o in outs[3:])
@@ -87,7 +90,9 @@ def test_contact_stages_close_the_wound_without_overlap(which, cylinder_mesh, we
 
 
 def test_contact_at_45_degrees(cylinder_mesh) -> None:
-    """Oblique fibres: the flanks are no mirror images, contact must still hold them apart."""
+    """Oblique fibres: the flanks are no mirror images, contact must still hold them apart.
+    (Surface model only: the material-depth model ends this job `max-iterations` at stage 4,
+    docs/design.md "Known limits".)"""
     m, outs = _run(cylinder_mesh, 45.0, skin="stiff")
     assert [o.solve.status for o in outs] == [CONVERGED] * 6
     d6 = outs[5].diagnostics

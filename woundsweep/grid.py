@@ -120,6 +120,8 @@ DEFAULTS: dict[str, Any] = {
     "stages": {
         "closure_zone": {"y_fraction": 1.0 / 3.0, "depth_fraction": 0.5},
         "contact_penalty_GPa": [1.0, 5.0, 100.0],
+        # "surface" (woundsweep.contact) or "depth" (woundsweep.depth); see docs/design.md.
+        "contact_model": "surface",
     },
     # Numerics (woundsweep.newton.NewtonSettings documents each key).
     "solver": {
@@ -154,6 +156,7 @@ DEFAULTS: dict[str, Any] = {
     },
 }
 SETTINGS = tuple(DEFAULTS)
+CHOICES = {"stages.contact_model": ("surface", "depth")}  # the string-valued settings
 TOP_KEYS = ("name", "description", "grid", "shapes", "exclude", *SETTINGS)
 
 
@@ -236,6 +239,10 @@ def _merge(path: str, key: str, default: Any, given: Any) -> Any:
                 f"unknown key (expected one of {sorted(default)})",
             )
         return {k: _merge(path, f"{key}.{k}", default[k], given.get(k)) for k in default}
+    if isinstance(default, str):
+        if given not in CHOICES[key]:
+            raise SweepError(path, key, f"expected one of {list(CHOICES[key])}, got {given!r}")
+        return str(given)
     if isinstance(default, list):
         if not isinstance(given, list) or len(given) != len(default):
             raise SweepError(path, key, f"expected a list of {len(default)} numbers, got {given!r}")

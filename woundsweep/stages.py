@@ -37,7 +37,9 @@ Physics (units mm, kPa, mN):
    flanks touch on the mid-plane. The stage ramps the closure from Dirichlet to traction and
    the penalty geometrically from ``CONTACT_START_kPa`` to k_V together; stages 5 and 6 start
    from the previous stage and ramp the penalty from its value. The contact term enters the
-   residual and its exact tangent the Jacobian (`FlankContact`). The force scale of the
+   residual and its exact tangent the Jacobian (`FlankContact`; with the sweep setting
+   ``stages.contact_model: depth`` the material-depth model `woundsweep.depth.DepthContact`,
+   which locates the contact points in the deformed cells of the other side). The force scale of the
    convergence test is the internal force without contact, so large penalty forces of an
    intermediate state cannot loosen the tolerance.
 
@@ -64,6 +66,7 @@ from petsc4py import PETSc
 
 from . import compat
 from .contact import GPA_TO_KPA, FlankContact, owning_cells, split_wound_flanks
+from .depth import DepthContact
 from .materials import (
     FLYNN_SKIN_TYPES,
     Fung,
@@ -193,6 +196,9 @@ def _assign(consts: Mapping[str, Any], material: Material) -> None:
         c.value = np.asarray(getattr(material, name), dtype=float)
 
 
+CONTACT_MODELS = ("depth", "surface")  # woundsweep.depth.DepthContact, contact.FlankContact
+
+
 class WoundModel:
     """Forms, boundary sets and stage logic for one mesh; materials can be reassigned.
 
@@ -212,7 +218,12 @@ class WoundModel:
         settings: NewtonSettings | None = None,
         jit: dict[str, Any] | None = None,
         contact_penalty_GPa: tuple[float, float, float] = (1.0, 5.0, 100.0),
+        contact_model: str = "surface",
     ) -> None:
+        if contact_model not in CONTACT_MODELS:
+            raise ValueError(
+                f"contact_model must be one of {CONTACT_MODELS}, not {contact_model!r}"
+            )
         self.zone_spec = zone or ClosureZone()
         if len(contact_penalty_GPa) != 3:
             raise ValueError("contact_penalty_GPa needs three values (stages 4, 5, 6)")
@@ -242,8 +253,14 @@ class WoundModel:
         self.cell_nodes = compat.cell_dofs(self.V)  # (m, 4) node indices, mesh cell order
         self._prepare_kinematics()
         self._classify(facets, ftags)
-        self.contact: FlankContact | None = None
-        if self.has_wound:
+        self.contact: FlankContact | DepthContact | None = None
+        if self.has_wound and contact_model == "depth":
+            side = self.X[self.cell_nodes].mean(axis=1)[:, 0] >= self.x_c
+            self.contact = DepthContact(
+                self.X, self.cell_nodes, side, self.input_node[facets[ftags == WOUND]],
+                max_depth_mm=self.wound_depth,
+            )  # fmt: skip
+        elif self.has_wound:
             left, right = split_wound_flanks(
                 self.X, self.cell_nodes, self.input_node[facets[ftags == WOUND]], self.x_c
             )

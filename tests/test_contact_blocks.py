@@ -31,12 +31,13 @@ import pytest
 from box_mesh import boundary_facets, box_tets
 
 from woundsweep.contact import GPA_TO_KPA, ContactSummary, FlankContact, orient_outward
-from woundsweep.depth import DepthContact
+from woundsweep.depth import WOUND_OPTIONS, DepthContact
 from woundsweep.materials import Fung, first_piola
 
 pytestmark = pytest.mark.fem
 
 N_BOX = 3  # grid boxes per block edge
+DEPTH_PRELOAD_MM = 1e-6  # depth model's starting overlap (the 1 GPa overlap is 3e-6 mm)
 PRESSURE_KPA = 10.0
 AREA_MM2 = 1.0
 K_V_GPA = (1.0, 5.0, 100.0)
@@ -132,7 +133,9 @@ class Blocks:
         else:
             side = self.in_right[self.cell_nodes].all(axis=1)
             surface = np.vstack([left, right])
-            self.contact = DepthContact(X, self.cell_nodes, side, surface, max_depth_mm=depth)
+            self.contact = DepthContact(
+                X, self.cell_nodes, side, surface, max_depth_mm=depth, **WOUND_OPTIONS
+            )
 
     # -- NonlinearProblem ---------------------------------------------------------------------
 
@@ -176,8 +179,8 @@ class Run(NamedTuple):
 
 @functools.cache
 def solve_blocks(n_right: int, model: str = "surface") -> dict[str, Any]:
-    """Solve the load at k_V = 1 GPa (load continuation from the touching state), then 5 and
-    100 GPa from the previous state. R has ``n_right``^2 grid boxes across x = 0; ``model``
+    """Solve the load at k_V = 1 GPa (load continuation from the touching state; the depth
+    model from DEPTH_PRELOAD_MM), then 5 and 100 GPa from the previous state. R has ``n_right``^2 grid boxes across x = 0; ``model``
     is "surface" (`FlankContact`) or "depth" (`DepthContact`)."""
     import ufl
 
@@ -189,7 +192,11 @@ def solve_blocks(n_right: int, model: str = "surface") -> dict[str, Any]:
     t_build = time.perf_counter() - t0
     u = prob.u.x.array
     # The start: the faces touch (g = 0 < touch_rel h), so every contact point is engaged and
-    # R's rigid motion in x is restrained from the first Newton step on.
+    # R's rigid motion in x is restrained from the first Newton step on. The depth model's
+    # engagement ramp has no stiffness at depth 0 (WOUND_OPTIONS), so there R starts pushed
+    # into L by DEPTH_PRELOAD_MM, below the loaded overlap.
+    if model == "depth":
+        u.reshape(-1, 3)[prob.in_right, 0] = -DEPTH_PRELOAD_MM
     prob.contact.k_V_kPa = K_V_GPA[0] * GPA_TO_KPA
     start = prob.contact.pairs(u) if model == "surface" else prob.contact.state(u)
     newton = NewtonSolver(prob, prob.A, NewtonSettings())

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from box_mesh import boundary_facets, box_tets
 
-from woundsweep.depth import DepthContact, material_depth
+from woundsweep.depth import WOUND_OPTIONS, DepthContact, material_depth
 
 K_V = 1.0e6  # kPa
 
@@ -129,3 +129,121 @@ def test_refresh_reports_a_change_of_the_normals() -> None:
     assert not c.refresh(u, tol=1e-12)  # same state: same normals
     c.freeze(np.zeros_like(u))  # normals of the undeformed blocks
     assert c.refresh(u, tol=1e-12)
+
+
+def test_linearised_normals_make_the_tangent_exact() -> None:
+    # Live nodal normals: the tangent adds c phi lam_i d n_i / dx over the cells around the
+    # master nodes, and then matches the force's derivative without any freezing.
+    c, u = _perturbed(6)
+    c.linearised = True
+    c.unfreeze()
+    K = c.tangent_csr(u)
+    dv = np.random.default_rng(7).standard_normal(u.size) * 1e-7
+    fd = (c.force_vector(u + dv) - c.force_vector(u - dv)) / 2.0
+    assert np.linalg.norm(K @ dv - fd) < 1e-6 * np.linalg.norm(fd)
+    c.freeze(u)
+    assert not c.frozen  # linearised normals are never frozen
+
+
+def test_engagement_ramp_keeps_the_force_a_function_of_k_times_depth() -> None:
+    # Magnitude c r(phi) with r = delta t^2 (2 - t), t = phi / delta, below delta, phi above, and
+    # delta = engage h / k_V: the force depends on k_V phi only, so penetrations still scale
+    # like 1 / k_V; one point below delta, one above, against the closed form.
+    c, X, nL = blocks()
+    c.engage_kPa = 50.0
+    forces = []
+    for k, d in ((1e6, 1e-5), (5e6, 2e-6), (1e8, 1e-7)):  # inside the ramp
+        c.k_V_kPa = k
+        forces.append(-c.force_vector(shift_right(X, nL, d)).reshape(-1, 3)[nL:, 0].sum())
+    np.testing.assert_allclose(forces, forces[0], rtol=1e-9)
+    c.k_V_kPa = K_V
+    for d in (2e-5, 1e-3):  # delta = 50 h / k_V is of order 2e-5 here: near it, and far above
+        f = -c.force_vector(shift_right(X, nL, d)).reshape(-1, 3)[nL:, 0].sum()
+        expected = 0.0
+        for p in c.points:
+            h = p.size_mm[0]
+            delta = 50.0 * h / K_V
+            r = delta * (d / delta) ** 2 * (2 - d / delta) if d < delta else d
+            expected += 0.5 * K_V * r / h
+        assert f == pytest.approx(expected, rel=1e-10)
+
+
+def test_exits_remove_the_jump_of_a_point_entering_past_the_rim() -> None:
+    # R pressed into L and slid along y past L's edge y = 1: R's contact points with y > 1 are
+    # outside L, those just inside enter through L's face y = 1 (an exit) at full depth d.
+    # Without the fade the force jumps as each point crosses; with it the force on a point
+    # rises from 0 while its distance to the exit grows to fade x its depth, so the total
+    # force varies continuously.
+    d = 0.02
+    s = np.linspace(0.0, 0.2, 401)
+    # The other remedy, exit_depth: the depth is measured to the exits too, so a point
+    # entering through one starts at depth 0.
+    steps = {}
+    for name, kw in (
+        ("none", {}),
+        ("fade", {"exit_fade": 1.0}),
+        ("exit depth", {"exact_depth": True, "exit_depth": True}),
+    ):
+        c, X, nL = blocks(n=2, m=5, **kw)
+        F = []
+        for sy in s:
+            u = shift_right(X, nL, d).reshape(-1, 3)
+            u[nL:, 1] += sy
+            F.append(-c.force_vector(u.ravel()).reshape(-1, 3)[nL:, 0].sum())
+        steps[name] = np.abs(np.diff(F))
+    for fixed in ("fade", "exit depth"):
+        assert steps["none"].max() > 10 * steps[fixed].max()
+        # no step far above the smooth variation (the median step of the sliding)
+        assert steps[fixed].max() < 20 * np.median(steps[fixed][steps[fixed] > 0])
+
+
+def _bumped(**kw) -> tuple[DepthContact, np.ndarray, int]:
+    """Blocks whose L face x = 0 is bent (x = 0.05 sin(pi y) sin(pi z)): a curved surface."""
+    pL, cL = box_tets(4, (-1.0, 0.0, 0.0), (0.0, 1.0, 1.0))
+    pL[:, 0] += 0.05 * np.sin(np.pi * pL[:, 1]) * np.sin(np.pi * pL[:, 2]) * (pL[:, 0] + 1.0)
+    pR, cR = box_tets(3, (0.1, 0.0, 0.0), (1.1, 1.0, 1.0))
+    X = np.vstack([pL, pR])
+    cells = np.vstack([cL, cR + len(pL)])
+    side = np.r_[np.zeros(len(cL), bool), np.ones(len(cR), bool)]
+    bf = boundary_facets(cells)
+    cen = X[bf].mean(axis=1)
+    surface = bf[(np.abs(cen[:, 0] - 0.1) < 1e-12) | ((cen[:, 0] > -0.01) & (cen[:, 0] < 0.06))]
+    c = DepthContact(X, cells, side, surface, max_depth_mm=0.5, **kw)
+    c.k_V_kPa = K_V
+    return c, X, len(pL)
+
+
+def test_exact_depth_is_the_distance_to_the_curved_surface() -> None:
+    # R pushed 0.14 into the bent face: each R point's depth is the exact distance of the L
+    # material point it occupies to L's faceted surface (brute force over all facets); the P1
+    # depth differs by the interpolation error of the curvature.
+    from woundsweep.contact import point_triangle_distance
+
+    c, X, nL = _bumped(exact_depth=True)
+    u = shift_right(X, nL, 0.14)
+    st = c.state(u)
+    mine = st.master == 0
+    assert mine.sum() > 20
+    Xq = np.einsum("ni,nij->nj", _lam(c, st, u)[mine], X[st.cell[mine]])
+    tri = X[c.facets[0]]
+    dist = point_triangle_distance(Xq[:, None], tri[None, :, 0], tri[None, :, 1], tri[None, :, 2])
+    np.testing.assert_allclose(st.depth[mine], dist[0].min(axis=1), atol=1e-12)
+    c.exact_depth = False
+    c._cache = None
+    p1 = c.state(u)
+    assert np.abs(p1.depth[p1.master == 0] - st.depth[mine]).max() > 1e-4
+
+
+def _lam(c: DepthContact, st, u: np.ndarray) -> np.ndarray:
+    x = c.positions(u)
+    return c._eval(st, np.einsum("ni,nij->nj", st.bary, x[st.carrier]), x[st.cell])[1]
+
+
+def test_tangent_with_every_option_is_the_force_derivative() -> None:
+    c, X, nL = _bumped(**WOUND_OPTIONS)
+    u = shift_right(X, nL, 0.13) + 1e-3 * np.random.default_rng(8).standard_normal(X.size)
+    assert len(c.state(u).depth) > 20
+    K = c.tangent_csr(u)
+    dv = np.random.default_rng(9).standard_normal(u.size) * 1e-8
+    fd = (c.force_vector(u + dv) - c.force_vector(u - dv)) / 2.0
+    assert np.linalg.norm(K @ dv - fd) < 1e-5 * np.linalg.norm(fd)

@@ -17,7 +17,15 @@ from typing import Any
 
 import numpy as np
 import pytest
-from test_contact_blocks import AREA_MM2, K_V_GPA, N_BOX, PRESSURE_KPA, solve_blocks, uniaxial_state
+from test_contact_blocks import (
+    AREA_MM2,
+    DEPTH_PRELOAD_MM,
+    K_V_GPA,
+    N_BOX,
+    PRESSURE_KPA,
+    solve_blocks,
+    uniaxial_state,
+)
 
 from woundsweep.contact import GPA_TO_KPA
 from woundsweep.materials import Fung
@@ -41,11 +49,12 @@ def matching() -> dict[str, Any]:
     return solve_blocks(N_BOX, "depth")
 
 
-def test_touching_start_engages_every_contact_point(solved) -> None:
+def test_preloaded_start_engages_every_contact_point(solved) -> None:
+    # R pushed rigidly by DEPTH_PRELOAD_MM into L: every point of both passes at that depth.
     prob, start = solved["prob"], solved["start"]
     n_facets = sum(len(f) for f in prob.contact.facets)
     assert len(start.depth) == 6 * n_facets
-    np.testing.assert_allclose(start.depth, 0.0, atol=1e-15)
+    np.testing.assert_allclose(start.depth, DEPTH_PRELOAD_MM, rtol=1e-6)
 
 
 @pytest.mark.parametrize("k_gpa", K_V_GPA)

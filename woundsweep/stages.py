@@ -66,7 +66,7 @@ from petsc4py import PETSc
 
 from . import compat
 from .contact import GPA_TO_KPA, FlankContact, owning_cells, split_wound_flanks
-from .depth import DepthContact
+from .depth import WOUND_OPTIONS, DepthContact
 from .materials import (
     FLYNN_SKIN_TYPES,
     Fung,
@@ -258,7 +258,7 @@ class WoundModel:
             side = self.X[self.cell_nodes].mean(axis=1)[:, 0] >= self.x_c
             self.contact = DepthContact(
                 self.X, self.cell_nodes, side, self.input_node[facets[ftags == WOUND]],
-                max_depth_mm=self.wound_depth,
+                max_depth_mm=self.wound_depth, **WOUND_OPTIONS,
             )  # fmt: skip
         elif self.has_wound:
             left, right = split_wound_flanks(

@@ -76,6 +76,7 @@ from .contact import (
     TWO_PASS_WEIGHT,
     ContactSummary,
     _contact_points,
+    _face_keys,
     _surface,
     orient_outward,
     owning_cells,
@@ -143,12 +144,12 @@ def side_exits(cells: np.ndarray, surface: np.ndarray) -> np.ndarray:
     """Boundary facets (k, 3) of the cell set ``cells`` other than ``surface``: where a point
     can enter the side without crossing its contact surface (the skin surface, the plane where
     the sides join beyond the wound's ends, the patch's faces)."""
-    faces = np.sort(cells[:, [[1, 2, 3], [0, 2, 3], [0, 1, 3], [0, 1, 2]]].reshape(-1, 3), axis=1)
-    uniq, count = np.unique(faces, axis=0, return_counts=True)
-    bnd = uniq[count == 1]
-    own = np.sort(np.asarray(surface), axis=1)
-    key = np.array([2**42, 2**21, 1], dtype=np.int64)
-    return bnd[~np.isin(bnd @ key, own @ key)]
+    faces = cells[:, [[1, 2, 3], [0, 2, 3], [0, 1, 3], [0, 1, 2]]].reshape(-1, 3)
+    n = int(max(cells.max(), np.max(surface))) + 1
+    keys = _face_keys(faces, n)
+    _, first, count = np.unique(keys, return_index=True, return_counts=True)
+    bnd = first[count == 1]
+    return faces[bnd[~np.isin(keys[bnd], _face_keys(surface, n))]]
 
 
 class DepthState(NamedTuple):
@@ -161,7 +162,6 @@ class DepthState(NamedTuple):
     cell_normal: np.ndarray  # (na, 4, 3) smoothed depth gradient at those nodes (or zeros)
     exit_facet: np.ndarray  # (na, 3) nearest exit facet of the master side (exit_fade)
     depth: np.ndarray  # (na,) material depth phi of the point (mm)
-    grad: np.ndarray  # (na, 3) grad_x phi in the master cell (deformed, 1/1)
     stiffness: np.ndarray  # (na,) c = w k_V A_q / h_q, mN/mm
     size_mm: np.ndarray  # (na,) h_q
     master: np.ndarray  # (na,) side of the master cell (0 or 1)
@@ -214,11 +214,11 @@ def _cell_force(
     l123 = np.einsum("nij,nj->ni", Minv, x - y[:, 0])
     lam = np.concatenate([1.0 - l123.sum(axis=1, keepdims=True), l123], axis=1)
     grads = np.concatenate([-Minv.sum(axis=1, keepdims=True), Minv], axis=1)  # (n, 4, 3)
+    Xq = None if ref is None else np.einsum("ni,nij->nj", lam, ref)  # the material point
     if tri is None or ref is None:
         g = np.einsum("ni,nij->nj", phi, grads)
         d = np.einsum("ni,ni->n", lam, phi)
     else:
-        Xq = np.einsum("ni,nij->nj", lam, ref)
         d = point_triangle_distance(Xq, tri[:, 0], tri[:, 1], tri[:, 2])[0]
         m = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
         inward = -m / np.linalg.norm(m, axis=1, keepdims=True)
@@ -230,8 +230,7 @@ def _cell_force(
         dl = np.maximum(delta, 1e-300)
         t = np.clip(d / dl, 0.0, 1.0)
         mag = c * np.where(d < dl, dl * t * t * (2.0 - t), d)
-    if exit_tri is not None and ref is not None and fade > 0.0:
-        Xq = np.einsum("ni,nij->nj", lam, ref)
+    if exit_tri is not None and Xq is not None and fade > 0.0:
         psi = point_triangle_distance(Xq, exit_tri[:, 0], exit_tri[:, 1], exit_tri[:, 2])[0]
         mag = mag * exit_weight(psi, fade * np.maximum(d, 0.0))
     r = mag[:, None] * n
@@ -298,7 +297,7 @@ class DepthContact:
             use = exit_fade > 0 or exit_depth
             exits = side_exits(cells[side == s], self.facets[int(s)]) if use else None
             if exits is not None and len(exits) == 0:
-                raise ValueError("exit_fade needs boundary facets other than the contact surface")
+                raise ValueError("exits need boundary facets other than the contact surface")
             self.exits[int(s)] = exits
             if exit_depth and exits is not None:
                 depth = np.minimum(depth, material_depth(self.X, own.ravel(), exits).reshape(-1, 4))
@@ -374,15 +373,16 @@ class DepthContact:
                 (qp, vp), (qm, vm) = cell_terms(y + d), cell_terms(y - d)
                 dq[:, :, m, b] = (qp - qm) / (2 * eps)
                 dv[:, m, b] = (vp - vm) / (2 * eps)
-        v = cell_terms(y)[1]
+        q, v = cell_terms(y)
         flat = reg.cells.ravel()
-        den = np.bincount(flat, weights=np.repeat(v, 4), minlength=len(x))
-        n = self._normals(x, side)
+        den = np.maximum(np.bincount(flat, weights=np.repeat(v, 4), minlength=len(x)), 1e-300)
+        num = [np.bincount(flat, weights=np.repeat(q[:, c], 4), minlength=len(x)) for c in range(3)]
+        n = np.stack(num, axis=1) / den[:, None]  # = _normals(x, side)
         i = reg.cells  # (nt, 4) row nodes
         # value[t, i, a, m, b] = (dq[t, a, m, b] - n_i[a] dv[t, m, b]) / D_i
-        val = (dq[:, None] - n[i][:, :, :, None, None] * dv[:, None, None]) / np.maximum(
-            den[i], 1e-300
-        )[:, :, None, None, None]
+        val = (dq[:, None] - n[i][:, :, :, None, None] * dv[:, None, None]) / den[i][
+            :, :, None, None, None
+        ]
         rows = np.broadcast_to((3 * i[:, :, None] + np.arange(3))[:, :, :, None, None], val.shape)
         cols = np.broadcast_to((3 * i[:, :, None] + np.arange(3))[:, None, None], val.shape)
         N = 3 * len(x)
@@ -446,8 +446,7 @@ class DepthContact:
         pts = np.einsum("qi,qij->qj", qp.bary, x[qp.carrier])
         y = x[reg.cells]  # (nt, 4, 3)
         M = np.transpose(y[:, 1:] - y[:, :1], (0, 2, 1))  # columns y_i - y_0
-        Minv, det = _inv3(M)  # rows: grad lam_1..3
-        grads = np.concatenate([-Minv.sum(axis=1, keepdims=True), Minv], axis=1)  # (nt, 4, 3)
+        Minv = _inv3(M)[0]  # rows: grad lam_1..3
         cen = y.mean(axis=1)
         reach = float(np.sqrt(np.max(np.sum((y - cen[:, None]) ** 2, axis=2))))
         k = min(self.candidates, len(cen))
@@ -464,29 +463,27 @@ class DepthContact:
         cell = cand[r, best][inside]
         lam = lam[r, best][inside]
         phi = np.einsum("ni,ni->n", lam, reg.phi[cell])
-        Xq = np.einsum("ni,nij->nj", lam, self.X[reg.cells[cell]])
         facet = np.zeros((len(cell), 3), dtype=np.int64)
+        exit_facet = np.zeros((len(cell), 3), dtype=np.int64)
+        exits = self.exits[1 - slave]
+        if self.exact_depth or exits is not None:
+            Xq = np.einsum("ni,nij->nj", lam, self.X[reg.cells[cell]])
+        if exits is not None and reg.near_exit is not None:
+            exit_facet, exit_dist, _ = _nearest(self.X, Xq, exits, reg.near_exit[cell])
         if self.exact_depth:
             # Unsigned: a located point is inside the master body, so its depth is >= 0 (the
             # plane's sign would flip inside the body next to a reflex edge of the surface).
             facet, phi, _ = _nearest(self.X, Xq, self.facets[1 - slave], reg.near[cell])
-            exits = self.exits[1 - slave]
-            if self.exit_depth and exits is not None and reg.near_exit is not None:
-                ef, ed, _ = _nearest(self.X, Xq, exits, reg.near_exit[cell])
-                closer = ed < phi
-                facet = np.where(closer[:, None], ef, facet)
-                phi = np.where(closer, ed, phi)
-        exit_facet = np.zeros((len(cell), 3), dtype=np.int64)
-        exits = self.exits[1 - slave]
-        if exits is not None and reg.near_exit is not None:
-            exit_facet = _nearest(self.X, Xq, exits, reg.near_exit[cell])[0]
+            if self.exit_depth and exits is not None:
+                closer = exit_dist < phi
+                facet = np.where(closer[:, None], exit_facet, facet)
+                phi = np.where(closer, exit_dist, phi)
         # Touching counts (phi > -touch_rel h), as in `woundsweep.contact`: a point on the
         # master surface carries no force but its stiffness, which holds a touching start.
         keep = phi > -self.touch_rel * qp.size_mm[inside]
         hit = np.flatnonzero(inside)[keep]
         cell, lam, phi, facet = cell[keep], lam[keep], phi[keep], facet[keep]
         exit_facet = exit_facet[keep]
-        g = np.einsum("ni,nij->nj", reg.phi[cell], grads[cell])
         if self.smooth_normal:
             frozen = self._nodal[1 - slave] if self.frozen else None
             nodal = frozen if frozen is not None else self._normals(x, 1 - slave)
@@ -495,7 +492,7 @@ class DepthContact:
             cn = np.zeros((len(cell), 4, 3))
         stiff = TWO_PASS_WEIGHT * self.k_V_kPa * qp.area_mm2[hit] / qp.size_mm[hit]
         return (qp.carrier[hit], qp.bary[hit], reg.cells[cell], reg.phi[cell], cn,
-                exit_facet, phi, g, stiff, qp.size_mm[hit],
+                exit_facet, phi, stiff, qp.size_mm[hit],
                 np.full(len(hit), 1 - slave, dtype=np.int8), facet)  # fmt: skip
 
     def state(self, u: np.ndarray) -> DepthState:
@@ -507,7 +504,7 @@ class DepthContact:
                 return self._cache
         t0 = time.perf_counter()
         parts = [self._pass(x, s) for s in (0, 1)]
-        cols = [np.concatenate([p[i] for p in parts]) for i in range(12)]
+        cols = [np.concatenate([p[i] for p in parts]) for i in range(11)]
         n_deep = int(np.sum(cols[6] > self.depth_cap_mm))
         out = DepthState(*cols, n_deep)
         self._cache, self._cache_x, self._cache_k = out, xn.copy(), self.k_V_kPa

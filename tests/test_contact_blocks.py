@@ -180,8 +180,9 @@ class Run(NamedTuple):
 @functools.cache
 def solve_blocks(n_right: int, model: str = "surface") -> dict[str, Any]:
     """Solve the load at k_V = 1 GPa (load continuation from the touching state; the depth
-    model from DEPTH_PRELOAD_MM), then 5 and 100 GPa from the previous state. R has ``n_right``^2 grid boxes across x = 0; ``model``
-    is "surface" (`FlankContact`) or "depth" (`DepthContact`)."""
+    model from DEPTH_PRELOAD_MM), then 5 and 100 GPa from the previous state. R has
+    ``n_right``^2 grid boxes across x = 0; ``model`` is "surface" (`FlankContact`) or "depth"
+    (`DepthContact`)."""
     import ufl
 
     from woundsweep.newton import LoadState, NewtonSettings, NewtonSolver, continuation

@@ -37,7 +37,7 @@ from woundsweep.materials import Fung, first_piola
 pytestmark = pytest.mark.fem
 
 N_BOX = 3  # grid boxes per block edge
-DEPTH_PRELOAD_MM = 1e-6  # depth model's starting overlap (the 1 GPa overlap is 3e-6 mm)
+DEPTH_PRELOAD_MM = 1e-6  # depth model's starting overlap (below the loaded overlap at 1 GPa)
 PRESSURE_KPA = 10.0
 AREA_MM2 = 1.0
 K_V_GPA = (1.0, 5.0, 100.0)

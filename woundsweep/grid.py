@@ -137,7 +137,9 @@ DEFAULTS: dict[str, Any] = {
         "gamma_min": 1.0 / 64.0,
         "residual_growth": 4.0,
         "divergence_factor": 1e6,
-        "contact_rtol": 1e-6,
+        "contact_rtol": 1e-5,
+        "contact_residual_growth": 1.0,
+        "contact_stol": 1e-6,
     },
     "analysis": {
         "quantiles": 8,

@@ -691,7 +691,14 @@ class WoundModel:
         self.newton.scale_from_residual = False
         settings = self.newton.settings
         self.newton.settings = dataclasses.replace(
-            settings, rtol=max(settings.rtol, settings.contact_rtol)
+            settings,
+            rtol=max(settings.rtol, settings.contact_rtol),
+            stol=max(settings.stol, settings.contact_stol),
+            residual_growth=(
+                settings.contact_residual_growth
+                if isinstance(c, FlankContact)
+                else settings.residual_growth
+            ),
         )
         try:
             decades = np.log10(k_to / k_from)

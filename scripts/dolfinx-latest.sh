@@ -48,11 +48,12 @@ PACKAGES=(python3-dolfinx-real python3-numpy python3-pandas
           python3-h5py python3-yaml python3-click python3-tqdm python3-matplotlib python3-sklearn
           python3-scipy python3-pytest python3-pytest-timeout
           libopenblas0-serial ca-certificates python3-pip
-          libglu1-mesa libxcursor1 libxinerama1 libxft2 libxrender1)
+          libgl1 libglu1-mesa libxcursor1 libxinerama1 libxft2 libxrender1)
 OPTIONAL_PACKAGES=(python3-pyarrow python3-xgboost)
-# gmsh comes from PyPI as on the host (Debian's python3-gmsh lacks the Netgen optimiser that
-# woundsweep.geometry enables), at the host venv's version so both DOLFINx versions solve the
-# same mesh (geometry.build_mesh is deterministic for one gmsh version).
+# The gmsh wheel dlopens libGL.so.1 and friends: libgl1 is named itself because sid's
+# libglu1-mesa no longer pulls it in. gmsh comes from PyPI as on the host (Debian's
+# python3-gmsh lacks the Netgen optimiser that woundsweep.geometry enables), at the host
+# venv's version so both DOLFINx versions solve the same mesh (geometry.build_mesh is deterministic for one gmsh version).
 host_gmsh=$("$SRC/.venv/bin/python" -c 'import gmsh; print(gmsh.__version__)' 2>/dev/null || true)
 WHEELS=("gmsh${host_gmsh:+==$host_gmsh}")
 
@@ -126,7 +127,11 @@ install_packages() {
     # pip in the root trusts what pip on the host trusts (e.g. a site proxy's CA bundle).
     local ca=${PIP_CERT:-${SSL_CERT_FILE:-}}
     rm -f "$ROOT/etc/ssl/host-ca-bundle.crt"
-    [[ -n $ca && -f $ca ]] && cp -L "$ca" "$ROOT/etc/ssl/host-ca-bundle.crt"
+    # A fresh minbase root may have no /etc/ssl yet (sid: ca-certificates is not in minbase).
+    if [[ -n $ca && -f $ca ]]; then
+        mkdir -p "$ROOT/etc/ssl"
+        cp -L "$ca" "$ROOT/etc/ssl/host-ca-bundle.crt"
+    fi
     # apt/dpkg need /proc and /dev/null; mount them privately for just this step.
     # shellcheck disable=SC2016  # the script is expanded by the inner bash
     if ! PKGS="${PACKAGES[*]}" OPT_PKGS="${OPTIONAL_PACKAGES[*]}" WHEELS="${WHEELS[*]}" unshare -m --propagation private bash -c '
@@ -156,6 +161,8 @@ install_packages() {
                     chroot "$root" python3 -m pip install -q --break-system-packages \
                     --only-binary=:all: "${cert[@]}" "${wheels[@]}"
             fi
+            # A missing shared library of the gmsh wheel fails here, with its name in the log.
+            chroot "$root" python3 -c "import gmsh"
             chroot "$root" apt-get clean
         ' _ "$ROOT" "${APT_OPTS[@]}" >>"$BUILD_LOG" 2>&1; then
         tail -n 20 "$BUILD_LOG" >&2; say "apt-get in the root failed"; exit "$BUILD_FAILED"

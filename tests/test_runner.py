@@ -24,7 +24,12 @@ import yaml
 from woundsweep.cli import COMMANDS
 from woundsweep.faults import FaultSpec, parse_faults
 from woundsweep.grid import load_run
-from woundsweep.runner import _JIT_TIMEOUT_RE, _lock_state, clear_stale_jit_locks
+from woundsweep.runner import (
+    _JIT_TIMEOUT_RE,
+    _lock_state,
+    clear_stale_jit_locks,
+    stability_note,
+)
 from woundsweep.shards import partition
 from woundsweep.store import read_results
 
@@ -101,6 +106,20 @@ def _assert_each_job_once(rd: Path, stages: int = 1) -> pd.DataFrame:
 
 
 # ---- the fault switch itself ----------------------------------------------------------
+def test_stability_note_of_a_failed_stage() -> None:
+    """The failure detail of a not-converged job says whether its last converged state was
+    stable (stages.py records the lowest eigenvalue nearest zero of the tangent there)."""
+    assert stability_note({"status": "max-iterations"}) == ""
+    assert stability_note({"stability_min_eig_mN_per_mm": None}) == ""
+    assert stability_note({"stability_min_eig_mN_per_mm": float("nan")}) == ""
+    unstable = {"stability_min_eig_mN_per_mm": -0.10651, "stability_penalty_kPa": 50339.0}
+    assert stability_note(unstable) == (
+        "; last converged state unstable (lowest eigenvalue -0.107 mN/mm at k_V = 5.03e+04 kPa)"
+    )
+    stable = stability_note({"stability_min_eig_mN_per_mm": 0.0036, "stability_penalty_kPa": 947})
+    assert stable.startswith("; last converged state stable (lowest eigenvalue 0.0036 mN/mm")
+
+
 def test_parse_faults() -> None:
     assert parse_faults("hang") == [FaultSpec("hang", None, None, None)]
     assert parse_faults("exit:4@7, segv@2#1") == [

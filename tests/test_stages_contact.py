@@ -13,6 +13,7 @@ import dataclasses
 
 import numpy as np
 import pytest
+import scipy.sparse
 
 pytestmark = pytest.mark.fem
 
@@ -129,3 +130,22 @@ def test_unconverged_contact_stage_is_recorded_as_such(cylinder_mesh) -> None:
     assert r4.displacement_mm is None and r4.result.p99_von_mises_kPa is None
     # The contact state it stopped in is still reported (penetration of the last iterate).
     assert r4.result.n_penetrating is not None and r4.result.max_penetration_mm is not None
+    # And the stability of the last converged state (here the stage-2 state at the starting
+    # penalty): the eigenvalue nearest zero of the symmetric free-dof tangent, recomputed
+    # densely from the same assembled tangent.
+    k0 = r4.extra["stability_penalty_kPa"]
+    assert k0 == pytest.approx(m.CONTACT_START_kPa)
+    np.testing.assert_allclose(m.u.x.array, m.displacements[2])
+    c = m.contact
+    c.k_V_kPa = k0
+    c.freeze(m.u.x.array)
+    m.jacobian(m.A)
+    c.unfreeze()
+    ai, aj, av = m.A.getValuesCSR()
+    free = np.ones(len(ai) - 1, dtype=bool)
+    free[m._gauge_rows()] = False
+    D = scipy.sparse.csr_matrix((av, aj, ai)).toarray()[np.ix_(free, free)]
+    w = np.linalg.eigvalsh(0.5 * (D + D.T))
+    nearest = np.sort(w[np.argsort(np.abs(w))[:3]])
+    assert r4.extra["stability_min_eig_mN_per_mm"] == pytest.approx(nearest[0], rel=1e-6)
+    assert nearest[0] > 0.0  # the closed 0-degree wound is a stable state

@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import ctypes
 import errno
+import math
 import os
 import re
 import resource
@@ -47,6 +48,7 @@ import subprocess
 import sys
 import time
 from collections import deque
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, NamedTuple
@@ -73,6 +75,7 @@ __all__ = [
     "jit_cache_dir",
     "pending_jit_locks",
     "run_shard",
+    "stability_note",
 ]
 
 EXIT_CONVERGED, EXIT_INVALID, EXIT_NOT_CONVERGED, EXIT_MESH_FAILED = 0, 2, 3, 4
@@ -307,6 +310,17 @@ def _signal_name(num: int) -> str:
         return f"signal {num}"
 
 
+def stability_note(stage: Mapping[str, Any]) -> str:
+    """'; last converged state stable|unstable (...)' from a failed stage's stability extras
+    (stages.py: the lowest eigenvalue nearest zero of its tangent), or '' without them."""
+    eig, k_V = stage.get("stability_min_eig_mN_per_mm"), stage.get("stability_penalty_kPa")
+    if eig is None or not math.isfinite(float(eig)):
+        return ""
+    kind = "unstable" if float(eig) < 0.0 else "stable"
+    at = f" at k_V = {float(k_V):.3g} kPa" if k_V is not None else ""
+    return f"; last converged state {kind} (lowest eigenvalue {float(eig):.3g} mN/mm{at})"
+
+
 class _Classified(NamedTuple):
     failure_class: str
     detail: str
@@ -344,6 +358,8 @@ def _classify(att: _Attempt, status: int, opts: RunOptions, log: Path) -> _Class
             return _Classified("crashed", f"exit 0 but no result for stages {missing}", None)
         if bad or code == EXIT_NOT_CONVERGED:
             what = f"stage {bad[0]} {out.stages[bad[0]]['status']}" if bad else "exit 3"
+            if bad:
+                what += stability_note(out.stages[bad[0]])
             return _Classified("not-converged", what, out)
         return _Classified("converged", "", out)
     last = next((ln for ln in reversed(tail.strip().splitlines()) if ln.strip()), "")[:300]

@@ -61,6 +61,7 @@ from typing import Any, NamedTuple
 
 import dolfinx.fem
 import numpy as np
+import scipy.sparse
 import ufl
 from petsc4py import PETSc
 
@@ -77,12 +78,14 @@ from .materials import (
     von_mises,
 )
 from .newton import (
+    CONVERGED,
     ContinuationResult,
     LoadState,
     NewtonSettings,
     NewtonSolver,
     continuation,
 )
+from .stability import lowest_eigenvalues
 
 __all__ = [
     "BOTTOM",
@@ -710,6 +713,10 @@ class WoundModel:
             self.newton.settings = settings
             c.k_V_kPa = k_to
             c.unfreeze()
+        if res.status != CONVERGED:
+            # Stalled at a stable state, or at a limit point of the path? (stability.py)
+            k_last = k_from ** (1.0 - res.load_reached) * k_to**res.load_reached
+            diag.update(self._stability(rows, k_last))
         r = self._residual_array()
         diag["closure_gap_mm"] = self.closure_gap()
         diag["pin_reaction_max_mN"] = float(np.max(np.abs(r[self._pin_rows()])))
@@ -729,6 +736,29 @@ class WoundModel:
             }
         )
         return res, diag
+
+    def _stability(self, rows: np.ndarray, k_V_kPa: float) -> dict[str, float]:
+        """Lowest eigenvalue nearest zero (mN/mm) of the symmetric free-dof tangent at the
+        current state with penalty ``k_V_kPa`` (NaN if it cannot be computed)."""
+        c = self.contact
+        assert c is not None
+        u = self.u.x.array
+        saved = c.k_V_kPa
+        c.k_V_kPa = k_V_kPa
+        c.freeze(u)
+        try:
+            self.jacobian(self.A)
+            ai, aj, av = self.A.getValuesCSR()
+            K = scipy.sparse.csr_matrix((av, aj, ai), shape=self.A.getSize())
+            free = np.ones(K.shape[0], dtype=bool)
+            free[rows] = False
+            w = float(lowest_eigenvalues(K, free)[0])
+        except ArithmeticError:
+            w = float("nan")
+        finally:
+            c.k_V_kPa = saved
+            c.unfreeze()
+        return {"stability_min_eig_mN_per_mm": w, "stability_penalty_kPa": k_V_kPa}
 
     def _lateral_force(self) -> float:
         """x-force (mN) of the healthy-skin traction on the x_max face: the load scale."""

@@ -595,9 +595,10 @@ class FlankContact:
         self.frozen = True
 
     def unfreeze(self) -> None:
-        """Search afresh at every new state again."""
+        """Search afresh at every new state again (the last search is kept: it is reused
+        while the flank nodes stay where it was made, e.g. by the next stage's first
+        `freeze` at the converged state of this one)."""
         self.frozen = False
-        self._found = None
         self._version += 1
 
     def refresh(self, u: np.ndarray, tol: float) -> bool:

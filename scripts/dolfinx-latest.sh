@@ -53,7 +53,8 @@ OPTIONAL_PACKAGES=(python3-pyarrow python3-xgboost)
 # The gmsh wheel dlopens libGL.so.1 and friends: libgl1 is named itself because sid's
 # libglu1-mesa no longer pulls it in. gmsh comes from PyPI as on the host (Debian's
 # python3-gmsh lacks the Netgen optimiser that woundsweep.geometry enables), at the host
-# venv's version so both DOLFINx versions solve the same mesh (geometry.build_mesh is deterministic for one gmsh version).
+# venv's version so both DOLFINx versions solve the same mesh (geometry.build_mesh is
+# deterministic for one gmsh version).
 host_gmsh=$("$SRC/.venv/bin/python" -c 'import gmsh; print(gmsh.__version__)' 2>/dev/null || true)
 WHEELS=("gmsh${host_gmsh:+==$host_gmsh}")
 

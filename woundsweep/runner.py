@@ -357,9 +357,10 @@ def _classify(att: _Attempt, status: int, opts: RunOptions, log: Path) -> _Class
         if code == EXIT_CONVERGED and missing:
             return _Classified("crashed", f"exit 0 but no result for stages {missing}", None)
         if bad or code == EXIT_NOT_CONVERGED:
-            what = f"stage {bad[0]} {out.stages[bad[0]]['status']}" if bad else "exit 3"
+            what = "exit 3"
             if bad:
-                what += stability_note(out.stages[bad[0]])
+                first = out.stages[bad[0]]
+                what = f"stage {bad[0]} {first['status']}{stability_note(first)}"
             return _Classified("not-converged", what, out)
         return _Classified("converged", "", out)
     last = next((ln for ln in reversed(tail.strip().splitlines()) if ln.strip()), "")[:300]

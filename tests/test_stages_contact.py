@@ -149,3 +149,28 @@ def test_unconverged_contact_stage_is_recorded_as_such(cylinder_mesh) -> None:
     nearest = np.sort(w[np.argsort(np.abs(w))[:3]])
     assert r4.extra["stability_min_eig_mN_per_mm"] == pytest.approx(nearest[0], rel=1e-6)
     assert nearest[0] > 0.0  # the closed 0-degree wound is a stable state
+
+
+def test_contact_stages_5_and_6_start_in_equilibrium(cylinder_mesh) -> None:
+    """At s = 0, stages 5 and 6 solve exactly the converged state of the stage before: the
+    out-of-balance force that the stage releases holds only its convergence residual. (It
+    once was computed with contact off, so it held the contact forces as well: a jump of
+    tens of mN at the first increment, which failed stage 5 of a 45-degree paper job.)"""
+    from woundsweep.stages import JobMaterials, WoundModel
+
+    m = WoundModel(cylinder_mesh)
+    m.set_materials(JobMaterials.table2("stiff", 0.0))
+    for k in range(1, 5):
+        assert m.run_stage(k).solve.status == CONVERGED
+    u = m.u.x.array
+    for stage in (5, 6):
+        rows = m._gauge_rows()
+        _, _, load, scale = m._contact_load(stage, rows)
+        start = load(0.0)
+        r = m._residual_array() - start.offset
+        r[rows] = 0.0
+        contact = m.contact.force_vector(u)
+        contact[rows] = 0.0
+        assert np.linalg.norm(contact) > 1e-3 * scale  # the contact forces are there ...
+        assert np.linalg.norm(r) <= 1e-12 * scale  # ... and balanced at s = 0
+        assert m.run_stage(stage).solve.status == CONVERGED

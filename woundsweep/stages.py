@@ -56,7 +56,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import Any, NamedTuple
 
 import dolfinx.fem
@@ -670,25 +670,9 @@ class WoundModel:
         u = self.u.x.array
         diag: dict[str, float] = {}
         c = self.contact
-        k_to = self.contact_penalty_kPa[stage - 4]
         if c is None:  # no wound: nothing can touch; the stage re-solves the stage-3 loads
             return self._ramp(rows, u[rows].copy(), self._residual_array()), {}
-        k_from = self.CONTACT_START_kPa if stage == 4 else self.contact_penalty_kPa[stage - 5]
-        k_from = min(k_from, k_to)
-        if stage == 4:
-            u[:] = self.displacements[2]
-        c.reset_timers()
-        c.k_V_kPa = 0.0
-        offset = self._residual_array()
-        offset[rows] = 0.0
-        values = u[rows].copy()
-        scale = float(np.linalg.norm(self._internal_force()))
-
-        def load(s: float) -> LoadState:
-            c.k_V_kPa = k_from ** (1.0 - s) * k_to**s
-            c.freeze(u)  # the pairing of the last converged state; Newton refreshes it
-            return LoadState(values, (1.0 - s) * offset)
-
+        k_from, k_to, load, scale = self._contact_load(stage, rows)
         # The residual of a penetrating start holds penalty forces far above the physical
         # ones; they must not set the convergence tolerance.
         self.newton.scale_from_residual = False
@@ -736,6 +720,38 @@ class WoundModel:
             }
         )
         return res, diag
+
+    def _contact_load(
+        self, stage: int, rows: np.ndarray
+    ) -> tuple[float, float, Callable[[float], LoadState], float]:
+        """Set up contact stage ``stage`` at the current state: (k_from, k_to, the load of the
+        continuation parameter s, the force scale). At s = 0 the state is in equilibrium."""
+        c = self.contact
+        assert c is not None
+        u = self.u.x.array
+        k_to = self.contact_penalty_kPa[stage - 4]
+        k_from = self.CONTACT_START_kPa if stage == 4 else self.contact_penalty_kPa[stage - 5]
+        k_from = min(k_from, k_to)
+        if stage == 4:
+            u[:] = self.displacements[2]
+        c.reset_timers()
+        # Out-of-balance force released over the stage: stage 4, that of the stage-2 state
+        # under the stage-3 loads (contact off); stages 5 and 6 start from an equilibrium
+        # with contact at k_from, so only its convergence residual is left to release.
+        c.k_V_kPa = 0.0 if stage == 4 else k_from
+        if stage > 4:
+            c.freeze(u)
+        offset = self._residual_array()
+        offset[rows] = 0.0
+        values = u[rows].copy()
+        scale = float(np.linalg.norm(self._internal_force()))
+
+        def load(s: float) -> LoadState:
+            c.k_V_kPa = k_from ** (1.0 - s) * k_to**s
+            c.freeze(u)  # the pairing of the last converged state; Newton refreshes it
+            return LoadState(values, (1.0 - s) * offset)
+
+        return k_from, k_to, load, scale
 
     def _stability(self, rows: np.ndarray, k_V_kPa: float) -> dict[str, float]:
         """Lowest eigenvalue nearest zero (mN/mm) of the symmetric free-dof tangent at the

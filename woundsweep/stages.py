@@ -755,26 +755,39 @@ class WoundModel:
 
     def _stability(self, rows: np.ndarray, k_V_kPa: float) -> dict[str, float]:
         """Lowest eigenvalue nearest zero (mN/mm) of the symmetric free-dof tangent at the
-        current state with penalty ``k_V_kPa`` (NaN if it cannot be computed)."""
+        current state with penalty ``k_V_kPa``, with and without the closure traction's load
+        stiffness (NaN if it cannot be computed). The closure traction follows the deformed
+        area (Nanson), a non-conservative load: without its load stiffness the tangent is the
+        Hessian of the stored and penalty energies, whose sign decides the stability of the
+        body under that load held fixed."""
         c = self.contact
         assert c is not None
         u = self.u.x.array
-        saved = c.k_V_kPa
+        saved, tau = c.k_V_kPa, float(self.tau.value)
         c.k_V_kPa = k_V_kPa
         c.freeze(u)
+        out = {}
         try:
-            self.jacobian(self.A)
-            ai, aj, av = self.A.getValuesCSR()
-            K = scipy.sparse.csr_matrix((av, aj, ai), shape=self.A.getSize())
-            free = np.ones(K.shape[0], dtype=bool)
-            free[rows] = False
-            w = float(lowest_eigenvalues(K, free)[0])
-        except ArithmeticError:
-            w = float("nan")
+            for key, t in (
+                ("stability_min_eig_mN_per_mm", tau),
+                ("stability_min_eig_conservative_mN_per_mm", 0.0),
+            ):
+                self.tau.value = t
+                self.jacobian(self.A)
+                ai, aj, av = self.A.getValuesCSR()
+                K = scipy.sparse.csr_matrix((av, aj, ai), shape=self.A.getSize())
+                free = np.ones(K.shape[0], dtype=bool)
+                free[rows] = False
+                try:
+                    out[key] = float(lowest_eigenvalues(K, free)[0])
+                except ArithmeticError:
+                    out[key] = float("nan")
         finally:
+            self.tau.value = tau
             c.k_V_kPa = saved
             c.unfreeze()
-        return {"stability_min_eig_mN_per_mm": w, "stability_penalty_kPa": k_V_kPa}
+        out["stability_penalty_kPa"] = k_V_kPa
+        return out
 
     def _lateral_force(self) -> float:
         """x-force (mN) of the healthy-skin traction on the x_max face: the load scale."""

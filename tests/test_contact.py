@@ -567,3 +567,32 @@ def test_a_master_that_flips_back_is_shared_half_and_half(squares, share: bool) 
     moved = {p for p in two if p in fifth and fifth[p][0][0] not in
              (first[p][0][0], second[p][0][0])}  # fmt: skip
     assert (bool(moved) == share) and all(len(fifth[p]) == 1 for p in moved)
+
+
+def test_a_retry_from_the_accepted_state_gets_its_pairing_back(squares) -> None:
+    """`freeze` at the state of the last accepted `refresh` (a converged state, where a retried
+    load increment starts) restores that pairing, shared points included, even after the
+    pairing history moved on; elsewhere it searches."""
+    X, left, right, rnodes = squares
+    contact = make_contact(X, left, right)
+    h = facet_size(4)
+
+    def state(dy: float) -> np.ndarray:
+        U = np.zeros_like(X)
+        U[rnodes, 0] = -1e-3
+        U[rnodes, 1] = dy
+        return U.ravel()
+
+    contact.freeze(state(0.0))
+    contact.refresh(state(0.4 * h), tol=0.0)
+    contact.refresh(state(0.0), tol=0.0)  # the flips back are shared now
+    assert not contact.refresh(state(0.0), tol=0.0)  # same state, same pairing: accepted
+    accepted = _masters(contact._found)
+    assert sum(len(e) == 2 for e in accepted.values()) > 10
+    f_accepted = contact.force_vector(state(0.0))
+    contact.refresh(state(-0.8 * h), tol=0.0)  # a failed attempt wandered off ...
+    contact.freeze(state(0.0))  # ... and the increment is retried from the accepted state
+    assert _masters(contact._found) == accepted
+    np.testing.assert_array_equal(contact.force_vector(state(0.0)), f_accepted)
+    contact.freeze(state(0.1 * h))
+    assert _masters(contact._found) != accepted

@@ -1,7 +1,5 @@
 """``python -m woundsweep`` is the same as the ``woundsweep`` console script."""
 
-import sys
+from .cli import console_main
 
-from .cli import main
-
-sys.exit(main())
+console_main()

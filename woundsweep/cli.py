@@ -8,7 +8,10 @@ and commands that do not need DOLFINx never import it.
 from __future__ import annotations
 
 import importlib
+import logging
+import os
 import sys
+from typing import NoReturn
 
 import click
 
@@ -98,5 +101,24 @@ def main(argv: list[str] | None = None) -> int:
     return rv if isinstance(rv, int) else 0
 
 
+def console_main() -> NoReturn:
+    """Console-script and ``python -m woundsweep`` entry: `main`, then exit at once.
+
+    Standard streams and logging are flushed, but the interpreter's teardown is skipped:
+    pyarrow's thread pools can abort it (``std::terminate`` from a still-joinable thread,
+    apache/arrow#34314), turning a finished command into SIGABRT (seen once in CI:
+    ``woundsweep slurm`` with a bad option printed its one-line error, then exited -6).
+    Every file the commands write is closed (and atomically renamed) before they return.
+    """
+    code = main()
+    logging.shutdown()
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):
+            pass
+    os._exit(code)
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    console_main()

@@ -69,7 +69,10 @@ configuration. Units: lengths mm, k_V kPa (1 GPa = 1e6 kPa), forces mN, energy m
   both, each with half its area, so its force is the mean of the two facets' forces (a
   discrete stand-in for the edge's normal), for as long as the search gives it A or B and
   the other facet stays valid for it; the energy is still a sum over (point, facet) pairs,
-  so residual and tangent are unchanged in form.
+  so residual and tangent are unchanged in form. The pairing (and its history) of the last
+  accepted refresh is kept: a load increment retried after a failure starts from it, so the
+  converged state it starts from is again an equilibrium of its pairing (a new search there
+  could have lost a shared point and started the retry 0.08 mN out of balance, measured).
 - Assembly. Residual contributions are summed into the flat dof vector with ``np.bincount``;
   tangent blocks go to the PETSc matrix as one CSR batch (``Mat.setValuesCSR``, ADD_VALUES).
   Couplings across the wound are not in the finite-element sparsity pattern: the matrix may
@@ -509,6 +512,8 @@ class FlankContact:
         self.near_rel = float(near_rel)
         self._found: _Candidates | None = None  # the pairing in use
         self._raw: _Candidates | None = None  # the last search
+        # Flank node positions, pairing and pairing history of the last accepted refresh.
+        self._accepted: tuple[Any, ...] | None = None
         self._search_x: np.ndarray | None = None
         self.frozen = False  # True: `pairs` reuses the pairing of the last `freeze`
         self._cand: tuple[np.ndarray, np.ndarray, np.ndarray] = (np.zeros(0),) * 3
@@ -618,8 +623,17 @@ class FlankContact:
         """Search the pairing at ``u`` and keep it (master facet of every candidate point)
         until the next `freeze`, `refresh` or `unfreeze`; engagement (g < touch) stays live.
         A point whose master flips back to one it had before shares the two
-        (`_share_cycles`)."""
-        self._pair(u)
+        (`_share_cycles`). At the state of the last accepted `refresh` (a converged state: the
+        start of a retried load increment or of the next stage) the pairing and its history
+        are restored as they were, so the state is again an equilibrium of its own pairing."""
+        acc = self._accepted
+        if acc is not None and np.array_equal(self.positions(u)[self.nodes], acc[0]):
+            self._found = acc[1]
+            for a, b in zip((self._cur, self._prev, self._sh_a, self._sh_b), acc[2:], strict=True):
+                a[:] = b
+            self._version += 1
+        else:
+            self._pair(u)
         self.frozen = True
 
     def _pair(self, u: np.ndarray) -> None:
@@ -693,7 +707,11 @@ class FlankContact:
         self._pair(u)
         after = self.force_vector(u)
         self.refreshes += 1
-        return bool(np.linalg.norm(after - before) > tol)
+        changed = bool(np.linalg.norm(after - before) > tol)
+        if not changed:  # accepted: keep what a retry from this state must start from
+            history = (a.copy() for a in (self._cur, self._prev, self._sh_a, self._sh_b))
+            self._accepted = (self.positions(u)[self.nodes], self._found, *history)
+        return changed
 
     def pairs(self, u: np.ndarray) -> ContactPairs:
         """Engaged contact points at displacement ``u``; cached by the flank node positions."""

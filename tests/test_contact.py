@@ -470,6 +470,14 @@ def test_fade_weight_values_and_derivatives() -> None:
         np.testing.assert_allclose((dwp - dwm) / (2 * h), d2w[:, :, j], atol=1e-5)
 
 
+def slid(X: np.ndarray, right_nodes: np.ndarray, dy: float) -> np.ndarray:
+    """Flat displacement: the right surface pushed 1e-3 into the left (-x) and slid by dy."""
+    U = np.zeros_like(X)
+    U[right_nodes, 0] = -1e-3
+    U[right_nodes, 1] = dy
+    return U.ravel()
+
+
 def _slide_forces(steps: int, fade_width: float = 0.25) -> np.ndarray:
     """x-force on the right square (3 x 3 facets, pushed 1e-3 into the left 4 x 4 one) while it
     slides by 0.3 along y, so that left contact points cross its boundary edge at y = 1."""
@@ -477,10 +485,7 @@ def _slide_forces(steps: int, fade_width: float = 0.25) -> np.ndarray:
     contact = make_contact(X, left, right, fade_width=fade_width)
     out = []
     for dy in np.linspace(0.0, 0.3, steps):
-        U = np.zeros_like(X)
-        U[rnodes, 0] = -1e-3
-        U[rnodes, 1] = dy
-        out.append(contact.force_vector(U.ravel()).reshape(-1, 3)[rnodes, 0].sum())
+        out.append(contact.force_vector(slid(X, rnodes, dy)).reshape(-1, 3)[rnodes, 0].sum())
     return np.array(out)
 
 
@@ -516,10 +521,7 @@ def test_a_master_that_flips_back_is_shared_half_and_half(squares, share: bool) 
     h = facet_size(4)
 
     def state(dy: float) -> np.ndarray:
-        U = np.zeros_like(X)
-        U[rnodes, 0] = -1e-3
-        U[rnodes, 1] = dy
-        return U.ravel()
+        return slid(X, rnodes, dy)
 
     contact.freeze(state(0.0))
     first = _masters(contact._found)
@@ -578,10 +580,7 @@ def test_a_retry_from_the_accepted_state_gets_its_pairing_back(squares) -> None:
     h = facet_size(4)
 
     def state(dy: float) -> np.ndarray:
-        U = np.zeros_like(X)
-        U[rnodes, 0] = -1e-3
-        U[rnodes, 1] = dy
-        return U.ravel()
+        return slid(X, rnodes, dy)
 
     contact.freeze(state(0.0))
     contact.refresh(state(0.4 * h), tol=0.0)

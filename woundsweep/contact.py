@@ -315,6 +315,12 @@ def fade_weight(lam: np.ndarray, width: float) -> tuple[np.ndarray, np.ndarray, 
     return w, dw, d2w
 
 
+def _facing(n: np.ndarray, m: np.ndarray, m_norm: np.ndarray, cos: float) -> np.ndarray:
+    """Whether master facets of normal ``m`` (length ``m_norm``) face slave facets of unit
+    normal ``n`` (broadcast): n . m <= cos |m|."""
+    return np.einsum("...i,...i->...", n, m) <= cos * m_norm
+
+
 def _face_keys(tri: np.ndarray, n: int) -> np.ndarray:
     t = np.sort(np.asarray(tri, dtype=np.int64), axis=1)
     return (t[:, 0] * n + t[:, 1]) * n + t[:, 2]
@@ -556,7 +562,7 @@ class FlankContact:
         own[rows] = np.any(ct[rows, :, :, None] == exclude[rows, None, None, :], axis=(2, 3))
         m = np.cross(v1 - v0, v2 - v0)
         mu = np.linalg.norm(m, axis=-1)
-        facing = np.einsum("ni,nki->nk", normals, m) <= self.normal_cos * mu
+        facing = _facing(normals[:, None, :], m, mu, self.normal_cos)
         # A point stays paired up to fade_width beyond the facet's edges (its weight fading
         # to 0 there); where the surface goes on, a neighbour takes over first. Only valid
         # facets compete, so a point is dropped only when none is left (a closest facet that
@@ -602,14 +608,14 @@ class FlankContact:
             qp.size_mm[keep], engaged, pid, mkey, int(deep.sum()),
         )  # fmt: skip
 
-    def _search(self, u: np.ndarray) -> None:
+    def _search(self, u: np.ndarray) -> np.ndarray:
         """Find the contact candidates of both passes at ``u`` (nothing to do if the last
-        search was at the same flank positions)."""
+        search was at the same flank positions); returns the deformed positions."""
         t0 = time.perf_counter()
         x = self.positions(u)
         xn = x[self.nodes]
         if self._found is not None and np.array_equal(xn, self._search_x):
-            return
+            return x
         self._search_x = xn.copy()
         parts = [self._detect_one(x, side) for side in (0, 1)]
         found = _Candidates(*(np.concatenate([p[i] for p in parts]) for i in range(8)),
@@ -618,6 +624,7 @@ class FlankContact:
         self._version += 1
         self.detect_time_s += time.perf_counter() - t0
         self.searches += 1
+        return x
 
     def freeze(self, u: np.ndarray) -> None:
         """Search the pairing at ``u`` and keep it (master facet of every candidate point)
@@ -638,10 +645,10 @@ class FlankContact:
 
     def _pair(self, u: np.ndarray) -> None:
         """The pairing in use: the search at ``u``, with 2-cycles shared if enabled."""
-        self._search(u)
+        x = self._search(u)
         raw = self._raw
         assert raw is not None
-        self._found = self._share_cycles(raw, self.positions(u)) if self.share_cycles else raw
+        self._found = self._share_cycles(raw, x) if self.share_cycles else raw
         self._version += 1
 
     def _share_cycles(self, raw: _Candidates, x: np.ndarray) -> _Candidates:
@@ -667,10 +674,9 @@ class FlankContact:
             lam = _projection(xq, pm[:, 0], pm[:, 1], pm[:, 2])[1]
             ps = x[raw.carrier[idx]]
             ns = np.cross(ps[:, 1] - ps[:, 0], ps[:, 2] - ps[:, 0])
+            ns /= np.linalg.norm(ns, axis=1, keepdims=True)
             nm = np.cross(pm[:, 1] - pm[:, 0], pm[:, 2] - pm[:, 0])
-            facing = np.einsum("ni,ni->n", ns, nm) <= self.normal_cos * (
-                np.linalg.norm(ns, axis=1) * np.linalg.norm(nm, axis=1)
-            )
+            facing = _facing(ns, nm, np.linalg.norm(nm, axis=1), self.normal_cos)
             pair[idx[~(facing & (lam.min(axis=1) > -self.fade_width))]] = False
         drop = raw.pid[(a >= 0) & ~pair]  # moved on: a single master again
         self._sh_a[drop] = self._sh_b[drop] = -1
@@ -710,7 +716,7 @@ class FlankContact:
         changed = bool(np.linalg.norm(after - before) > tol)
         if not changed:  # accepted: keep what a retry from this state must start from
             history = (a.copy() for a in (self._cur, self._prev, self._sh_a, self._sh_b))
-            self._accepted = (self.positions(u)[self.nodes], self._found, *history)
+            self._accepted = (self._search_x, self._found, *history)  # _pair searched at u
         return changed
 
     def pairs(self, u: np.ndarray) -> ContactPairs:

@@ -320,11 +320,7 @@ def stability_note(stage: Mapping[str, Any]) -> str:
     kind = "unstable" if float(eig) < 0.0 else "stable"
     at = f" at k_V = {float(k_V):.3g} kPa" if k_V is not None else ""
     cons = stage.get("stability_min_eig_conservative_mN_per_mm")
-    if (
-        cons is not None
-        and math.isfinite(float(cons))
-        and (float(cons) < 0.0) != (kind == "unstable")
-    ):
+    if cons is not None and math.isfinite(float(cons)) and (float(cons) < 0) != (float(eig) < 0):
         at += f"; {float(cons):.3g} without the closure traction's load stiffness"
     return f"; last converged state {kind} (lowest eigenvalue {float(eig):.3g} mN/mm{at})"
 

@@ -13,8 +13,9 @@ energy, which decides stability. The closure traction is not conservative: it fo
 deformed area, so its load stiffness makes K non-symmetric, and its symmetric part is no
 energy Hessian. `stages` therefore records the value with and without that load stiffness
 (measured on a 45-degree paper job: -0.0057 mN/mm with it, while along the same mode the
-material part alone is +0.010). Eigenvalues are in the tangent's units, mN/mm. They are found by shift-invert Lanczos (scipy ``eigsh``)
-around a shift just below zero, so the ones nearest zero come first, from either side.
+material part alone is +0.010). Eigenvalues are in the tangent's units, mN/mm. They are
+found by shift-invert Lanczos (scipy ``eigsh``) around a shift just below zero, so the ones
+nearest zero come first, from either side.
 """
 
 from __future__ import annotations

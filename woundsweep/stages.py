@@ -767,6 +767,8 @@ class WoundModel:
         c.k_V_kPa = k_V_kPa
         c.freeze(u)
         out = {}
+        free = np.ones(self.A.getSize()[0], dtype=bool)
+        free[rows] = False
         try:
             for key, t in (
                 ("stability_min_eig_mN_per_mm", tau),
@@ -776,8 +778,6 @@ class WoundModel:
                 self.jacobian(self.A)
                 ai, aj, av = self.A.getValuesCSR()
                 K = scipy.sparse.csr_matrix((av, aj, ai), shape=self.A.getSize())
-                free = np.ones(K.shape[0], dtype=bool)
-                free[rows] = False
                 try:
                     out[key] = float(lowest_eigenvalues(K, free)[0])
                 except ArithmeticError:

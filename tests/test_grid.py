@@ -159,3 +159,13 @@ def test_contact_model_setting() -> None:
     data["stages"] = {"contact_model": 3}
     with pytest.raises(SweepError, match="stages.contact_model"):
         parse_sweep(data)
+
+
+def test_closure_load_setting() -> None:
+    data = yaml.safe_load(Path(DEMO).read_text())
+    assert parse_sweep(data).stages["closure_load"] == "dead"
+    data["stages"] = {"closure_load": "follower"}
+    assert parse_sweep(data).stages["closure_load"] == "follower"
+    data["stages"] = {"closure_load": "pressure"}
+    with pytest.raises(SweepError, match="stages.closure_load"):
+        parse_sweep(data)

@@ -82,3 +82,81 @@ def test_failures_in_a_row_end_the_stage_after_max_load_cuts() -> None:
     assert newton.tried == [0.5, 0.25, 0.125]
     assert res.status == MAX_ITERATIONS and res.load_reached == 0.0 and res.cuts == 3
     np.testing.assert_array_equal(newton.problem.u, 0.0)  # restored to the start
+
+
+class _DoubleWell:
+    """E(u) = sum_i (u_i^2 - 1)^2 / 4 + c (u_0 - u_1)^2 / 2: minima at u = +-(1, 1), a
+    maximum at 0 (tangent -1 + coupling). Protocol of `woundsweep.newton.NonlinearProblem`."""
+
+    c = 0.1
+
+    def __init__(self, u0: list[float]) -> None:
+        self.u = np.array(u0, dtype=float)
+
+    def solution(self) -> np.ndarray:
+        return self.u
+
+    def _grad(self) -> np.ndarray:
+        u = self.u
+        return u**3 - u + self.c * np.array([u[0] - u[1], u[1] - u[0]])
+
+    def residual(self, b: Any) -> None:
+        b.getArray()[:] = self._grad()
+
+    def jacobian(self, A: Any) -> None:
+        u, c = self.u, self.c
+        K = np.diag(3 * u**2 - 1 + c) - c * (1 - np.eye(2))
+        A.zeroEntries()
+        A.setValues([0, 1], [0, 1], K.ravel())
+        A.assemble()
+
+    def energy(self) -> float:
+        u = self.u
+        return float(np.sum((u**2 - 1) ** 2) / 4 + self.c * (u[0] - u[1]) ** 2 / 2)
+
+    def min_det(self, u: np.ndarray) -> float:
+        return 1.0
+
+    def max_strain(self, du: np.ndarray) -> float:
+        return float(np.abs(du).max())
+
+    def length_scale(self) -> float:
+        return 1.0
+
+
+@pytest.mark.fem
+@pytest.mark.parametrize("energy_merit", [False, True])
+def test_energy_merit_leaves_an_unstable_equilibrium(energy_merit: bool) -> None:
+    """Near the maximum of a double well the Newton step points uphill (the tangent is
+    negative definite). The residual rule follows it to the maximum, an unstable equilibrium;
+    with the energy merit the shifted tangent (`NewtonSolver._shifted`) goes downhill to the
+    minimum (1, 1), and every accepted step lowers E."""
+    from petsc4py import PETSc
+
+    from woundsweep.newton import NewtonSolver
+
+    p = _DoubleWell([0.05, 0.05])
+    A = PETSc.Mat().createAIJ([2, 2], nnz=2)
+    A.setUp()
+    A.setValues([0, 1], [0, 1], np.ones(4))
+    A.assemble()
+    st = NewtonSettings(rtol=0.0, atol=1e-10, stol=1e-9, energy_merit=energy_merit)
+    newton = NewtonSolver(p, A, st)  # type: ignore[arg-type]
+    energies: list[float] = []
+    real = newton._relax
+
+    def relax(*args: Any) -> Any:
+        out = real(*args)
+        energies.append(p.energy())
+        return out
+
+    newton._relax = relax  # type: ignore[method-assign]
+    e_start = p.energy()
+    res = newton.solve(np.zeros(0, dtype=np.int32), np.zeros(0))
+    assert res.status == CONVERGED
+    if energy_merit:
+        np.testing.assert_allclose(p.u, [1.0, 1.0], atol=1e-8)
+        assert energies[-1] < e_start
+        assert all(b <= a + 1e-15 for a, b in zip([e_start, *energies], energies))
+    else:
+        np.testing.assert_allclose(p.u, [0.0, 0.0], atol=1e-8)

@@ -118,14 +118,6 @@ def test_stability_note_of_a_failed_stage() -> None:
     )
     stable = stability_note({"stability_min_eig_mN_per_mm": 0.0036, "stability_penalty_kPa": 947})
     assert stable.startswith("; last converged state stable (lowest eigenvalue 0.0036 mN/mm")
-    # The conservative part (no closure-traction load stiffness) is named when its sign differs.
-    follower = dict(unstable, stability_min_eig_conservative_mN_per_mm=0.01)
-    assert stability_note(follower) == (
-        "; last converged state unstable (lowest eigenvalue -0.107 mN/mm at k_V = 5.03e+04 kPa;"
-        " 0.01 without the closure traction's load stiffness)"
-    )
-    same = dict(unstable, stability_min_eig_conservative_mN_per_mm=-0.2)
-    assert stability_note(same) == stability_note(unstable)
 
 
 def test_parse_faults() -> None:

@@ -136,33 +136,82 @@ def test_unconverged_contact_stage_is_recorded_as_such(cylinder_mesh) -> None:
     k0 = r4.extra["stability_penalty_kPa"]
     assert k0 == pytest.approx(m.CONTACT_START_kPa)
     np.testing.assert_allclose(m.u.x.array, m.displacements[2])
-    # Without the closure traction's load stiffness (tau = 0 in the tangent only) as well.
     c = m.contact
     c.k_V_kPa = k0
     c.freeze(m.u.x.array)
-    tau = float(m.tau.value)
-    assert tau > 0.0
-    nearest = {}
-    for key, t in (("stability_min_eig_mN_per_mm", tau),
-                   ("stability_min_eig_conservative_mN_per_mm", 0.0)):  # fmt: skip
-        m.tau.value = t
-        m.jacobian(m.A)
-        ai, aj, av = m.A.getValuesCSR()
-        free = np.ones(len(ai) - 1, dtype=bool)
-        free[m._gauge_rows()] = False
-        D = scipy.sparse.csr_matrix((av, aj, ai)).toarray()[np.ix_(free, free)]
-        w = np.linalg.eigvalsh(0.5 * (D + D.T))
-        nearest[key] = np.sort(w[np.argsort(np.abs(w))[:3]])[0]
-        assert r4.extra[key] == pytest.approx(nearest[key], rel=1e-6)
-    m.tau.value = tau
+    m.jacobian(m.A)
+    ai, aj, av = m.A.getValuesCSR()
     c.unfreeze()
-    assert nearest["stability_min_eig_mN_per_mm"] > 0.0  # the closed 0-degree wound is stable
-    # The load stiffness of the traction (it follows the deformed area) is in the first one.
-    a, b = (
-        nearest["stability_min_eig_mN_per_mm"],
-        nearest["stability_min_eig_conservative_mN_per_mm"],
-    )
-    assert abs(a - b) > 1e-6 * abs(b)
+    free = np.ones(len(ai) - 1, dtype=bool)
+    free[m._gauge_rows()] = False
+    D = scipy.sparse.csr_matrix((av, aj, ai)).toarray()[np.ix_(free, free)]
+    # Every load of a contact stage is dead, so the tangent is an energy Hessian: symmetric.
+    assert np.abs(D - D.T).max() < 1e-10 * np.abs(D).max()
+    w = np.linalg.eigvalsh(0.5 * (D + D.T))
+    nearest = np.sort(w[np.argsort(np.abs(w))[:3]])[0]
+    assert r4.extra["stability_min_eig_mN_per_mm"] == pytest.approx(nearest, rel=1e-6)
+    assert nearest > 0.0  # the closed 0-degree wound is stable
+
+
+def test_contact_stage_potential_is_that_of_the_residual(cylinder_mesh) -> None:
+    """In the contact stages the closure traction is a dead load (stage-2 area), so the stage
+    has a potential: its directional derivative is R . v (central differences, frozen
+    pairing), and the closure force is the same at any state (tau times the stage-2 area of
+    the flank). In stage 3 the traction follows the deformed area: no potential, and the force
+    changes with the state."""
+    from woundsweep.stages import JobMaterials, WoundModel
+
+    m = WoundModel(cylinder_mesh)
+    m.set_materials(JobMaterials.table2("stiff", 0.0))
+    for k in (1, 2, 3):
+        assert m.run_stage(k).solve.status == CONVERGED
+    assert m.energy() is None  # stage 3: a follower load
+
+    def closure_force() -> float:
+        # x-force of the closure traction on the left flank: R without tau minus R with it.
+        r1 = m._residual_array()
+        tau = float(m.tau.value)
+        m.tau.value = 0.0
+        r0 = m._residual_array()
+        m.tau.value = tau
+        left = np.flatnonzero(m.X[:, 0] < m.x_c)
+        return float(np.sum((r0 - r1)[3 * left]))
+
+    u = m.u.x.array
+    u3 = u.copy()
+    follow3 = closure_force()  # the stage-3 (follower) load at the stage-3 state
+    assert follow3 == pytest.approx(m.tau_kPa * m.deformed_zone_area("left"), rel=1e-10)
+    m.run_stage(4)
+    assert m.energy() is not None
+    u4 = u.copy()
+    u[:] = m.displacements[2]
+    dead = m.tau_kPa * m.deformed_zone_area("left")
+    for state in (u3, u4):
+        u[:] = state
+        assert closure_force() == pytest.approx(dead, rel=1e-10)
+    assert abs(follow3 - dead) > 1e-4 * dead  # the stage-3 area differs from stage 2's
+    u[:] = u4
+    c = m.contact
+    c.freeze(u)
+    # Away from the equilibrium (where R . v would vanish): a random state near it.
+    rng = np.random.default_rng(1)
+    free = np.ones(len(u), dtype=bool)
+    free[m._gauge_rows()] = False
+    w = np.where(free, rng.standard_normal(len(u)), 0.0)
+    v = np.where(free, rng.standard_normal(len(u)), 0.0)
+    u0 = u4 + 1e-4 * w
+    u[:] = u0
+    R = m._residual_array()
+    eps = 1e-6
+    u[:] = u0 + eps * v
+    e_plus = m.energy()
+    u[:] = u0 - eps * v
+    e_minus = m.energy()
+    u[:] = u4
+    fd = (e_plus - e_minus) / (2 * eps)
+    assert abs(R @ v) > 1e-3 * np.linalg.norm(R) * np.linalg.norm(v) / np.sqrt(len(v))
+    assert fd == pytest.approx(float(R @ v), rel=1e-5)
+    c.unfreeze()
 
 
 def test_contact_stages_5_and_6_start_in_equilibrium(cylinder_mesh) -> None:
@@ -188,3 +237,24 @@ def test_contact_stages_5_and_6_start_in_equilibrium(cylinder_mesh) -> None:
         assert np.linalg.norm(contact) > 1e-3 * scale  # the contact forces are there ...
         assert np.linalg.norm(r) <= 1e-12 * scale  # ... and balanced at s = 0
         assert m.run_stage(stage).solve.status == CONVERGED
+
+
+def test_follower_closure_load_holds_at_the_converged_state(cylinder_mesh) -> None:
+    """``closure_load="follower"``: the traction's area state is each increment's start and is
+    moved to the converged state until that changes the forces by less than the tolerance, so
+    stage 4 ends in equilibrium under the traction per current area (stage 3's load)."""
+    from woundsweep.stages import JobMaterials, WoundModel
+
+    m = WoundModel(cylinder_mesh, closure_load="follower")
+    m.set_materials(JobMaterials.table2("stiff", 0.0))
+    for k in (1, 2, 3, 4):
+        assert m.run_stage(k).solve.status == CONVERGED
+    u = m.u.x.array
+    np.testing.assert_array_equal(m.u_area.x.array, u)
+    # The true follower residual (area state = u) is converged: same test as Newton's.
+    r = m._residual_array()
+    r[m._gauge_rows()] = 0.0
+    scale = float(np.linalg.norm(m._internal_force()))
+    assert np.linalg.norm(r) <= m.settings.contact_rtol * scale
+    with pytest.raises(ValueError, match="closure_load"):
+        WoundModel(cylinder_mesh, closure_load="pressure")

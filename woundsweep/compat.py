@@ -257,6 +257,11 @@ def assemble_matrix(A: PETSc.Mat, a: Any) -> PETSc.Mat:
     return A
 
 
+def assemble_scalar(M: Any) -> float:
+    """Value of the compiled functional ``M`` (serial)."""
+    return float(dolfinx.fem.assemble_scalar(M))
+
+
 def assemble_vector(b: PETSc.Vec, L: Any) -> PETSc.Vec:
     """Zero ``b`` and assemble ``L`` into it (ghost contributions summed)."""
     with b.localForm() as loc:

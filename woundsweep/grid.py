@@ -122,6 +122,8 @@ DEFAULTS: dict[str, Any] = {
         "contact_penalty_GPa": [1.0, 5.0, 100.0],
         # "surface" (woundsweep.contact) or "depth" (woundsweep.depth); see docs/design.md.
         "contact_model": "surface",
+        # Closure traction of stages 4-6: "dead" (stage-2 area) or "follower" (woundsweep.stages).
+        "closure_load": "dead",
     },
     # Numerics (woundsweep.newton.NewtonSettings documents each key).
     "solver": {
@@ -137,9 +139,9 @@ DEFAULTS: dict[str, Any] = {
         "gamma_min": 1.0 / 64.0,
         "residual_growth": 4.0,
         "divergence_factor": 1e6,
-        "contact_rtol": 1e-5,
+        "contact_rtol": 1e-4,
         "contact_residual_growth": 1.0,
-        "contact_stol": 1e-6,
+        "contact_stol": 1e-5,
     },
     "analysis": {
         "quantiles": 8,
@@ -158,7 +160,10 @@ DEFAULTS: dict[str, Any] = {
     },
 }
 SETTINGS = tuple(DEFAULTS)
-CHOICES = {"stages.contact_model": ("surface", "depth")}  # the string-valued settings
+CHOICES = {
+    "stages.contact_model": ("surface", "depth"),
+    "stages.closure_load": ("dead", "follower"),
+}  # the string-valued settings
 TOP_KEYS = ("name", "description", "grid", "shapes", "exclude", *SETTINGS)
 
 

@@ -312,16 +312,12 @@ def _signal_name(num: int) -> str:
 
 def stability_note(stage: Mapping[str, Any]) -> str:
     """'; last converged state stable|unstable (...)' from a failed stage's stability extras
-    (stages.py: the lowest eigenvalue nearest zero of its tangent, and the same without the
-    closure traction's load stiffness when the two differ in sign), or '' without them."""
+    (stages.py: the lowest eigenvalue nearest zero of its tangent), or '' without them."""
     eig, k_V = stage.get("stability_min_eig_mN_per_mm"), stage.get("stability_penalty_kPa")
     if eig is None or not math.isfinite(float(eig)):
         return ""
     kind = "unstable" if float(eig) < 0.0 else "stable"
     at = f" at k_V = {float(k_V):.3g} kPa" if k_V is not None else ""
-    cons = stage.get("stability_min_eig_conservative_mN_per_mm")
-    if cons is not None and math.isfinite(float(cons)) and (float(cons) < 0) != (float(eig) < 0):
-        at += f"; {float(cons):.3g} without the closure traction's load stiffness"
     return f"; last converged state {kind} (lowest eigenvalue {float(eig):.3g} mN/mm{at})"
 
 

@@ -293,6 +293,7 @@ def solve_job(
             jit=jit,
             contact_penalty_GPa=tuple(run.sweep.stages["contact_penalty_GPa"]),
             contact_model=str(run.sweep.stages["contact_model"]),
+            closure_load=str(run.sweep.stages["closure_load"]),
         )
     except ValueError as err:  # the mesh's tags or numbering do not fit the contract
         raise GeometryError(f"job {job_index}: unusable mesh: {err}") from None

@@ -9,11 +9,11 @@ the two kinds of failure can be told apart (docs/design.md, "Known limits").
 
 The tangent is restricted to the free dofs (the Dirichlet rows and columns dropped) and
 symmetrised, (K + K^T) / 2. For a conservative problem that is the second variation of the
-energy, which decides stability. The closure traction is not conservative: it follows the
-deformed area, so its load stiffness makes K non-symmetric, and its symmetric part is no
-energy Hessian. `stages` therefore records the value with and without that load stiffness
-(measured on a 45-degree paper job: -0.0057 mN/mm with it, while along the same mode the
-material part alone is +0.010). Eigenvalues are in the tangent's units, mN/mm. They are
+energy, which decides stability. The contact stages are conservative since session 10: their
+closure traction is a dead load (`stages`). (Until then it followed the deformed area, whose
+load stiffness made K non-symmetric: on a 45-degree paper job that alone made the lowest
+eigenvalue negative, -0.0057 mN/mm, while the material part along the same mode was +0.010.)
+Eigenvalues are in the tangent's units, mN/mm. They are
 found by shift-invert Lanczos (scipy ``eigsh``) around a shift just below zero, so the ones
 nearest zero come first, from either side.
 """

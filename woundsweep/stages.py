@@ -27,8 +27,14 @@ Physics (units mm, kPa, mN):
    stage-2 reaction force of the closure condition on both flanks divided by the deformed
    zone area at the end of stage 2, so the stage-3 closing force equals the stage-2 one while
    its distribution becomes uniform. The remaining gap is reported as ``closure_gap_mm``.
-4-6. Contact (paper: "material depth contact model"): the loads of stage 3 stay, and the
-   penalty contact of the wound flanks (`woundsweep.contact`, two-pass surface-to-surface,
+4-6. Contact (paper: "material depth contact model"): the loads of stage 3 stay, with the
+   closure traction frozen as a dead load: tau times the Nanson factor of the stage-2 state
+   (the state stage 4 starts from, at which tau was sized), so the closing force on each
+   flank is the stage-2 one at every state and the stage has a potential energy (stored
+   energy + penalty energy - work of the dead loads). Newton then accepts updates that lower
+   that energy and leaves unstable equilibria (`woundsweep.newton`); with the follower load
+   the tangent was non-symmetric and Newton stalled on about half of the 45-degree jobs
+   (docs/design.md, "Contact models", session 10). The penalty contact of the wound flanks (`woundsweep.contact`, two-pass surface-to-surface,
    pressure k_V * depth / h) is switched on with k_V = 1, 5, 100 GPa (sweep key
    ``stages.contact_penalty_GPa``). Stage 4 solves the stage-3 loads with contact starting
    from the stage-2 state, not the stage-3 one: without contact, stage 3's uniform traction
@@ -200,6 +206,9 @@ def _assign(consts: Mapping[str, Any], material: Material) -> None:
 
 
 CONTACT_MODELS = ("depth", "surface")  # woundsweep.depth.DepthContact, contact.FlankContact
+# The closure traction in stages 4-6 (module docstring): on the stage-2 area, or on the
+# current one (each load increment's state, updated at convergence until it holds).
+CLOSURE_LOADS = ("dead", "follower")
 
 
 class WoundModel:
@@ -222,11 +231,15 @@ class WoundModel:
         jit: dict[str, Any] | None = None,
         contact_penalty_GPa: tuple[float, float, float] = (1.0, 5.0, 100.0),
         contact_model: str = "surface",
+        closure_load: str = "dead",
     ) -> None:
         if contact_model not in CONTACT_MODELS:
             raise ValueError(
                 f"contact_model must be one of {CONTACT_MODELS}, not {contact_model!r}"
             )
+        if closure_load not in CLOSURE_LOADS:
+            raise ValueError(f"closure_load must be one of {CLOSURE_LOADS}, not {closure_load!r}")
+        self.closure_follows = closure_load == "follower"
         self.zone_spec = zone or ClosureZone()
         if len(contact_penalty_GPa) != 3:
             raise ValueError("contact_penalty_GPa needs three values (stages 4, 5, 6)")
@@ -391,10 +404,17 @@ class WoundModel:
         dx = ufl.Measure("dx", domain=mesh, subdomain_data=self.cell_mt, metadata=md)
         ds = ufl.Measure("ds", domain=mesh, subdomain_data=self.solver_facet_mt, metadata=md)
         N = ufl.FacetNormal(mesh)
-        P_d = ufl.diff(dermis_sym.strain_energy(F), F)
-        P_s = ufl.diff(sub_sym.strain_energy(F), F)
-        # Nanson (eq. 17): deformed area element per reference area, |J F^-T N|.
-        nanson = ufl.sqrt(ufl.dot(ufl.det(F) * ufl.inv(F).T * N, ufl.det(F) * ufl.inv(F).T * N))
+        psi_d, psi_s = dermis_sym.strain_energy(F), sub_sym.strain_energy(F)
+        P_d = ufl.diff(psi_d, F)
+        P_s = ufl.diff(psi_s, F)
+        # Nanson (eq. 17): deformed area element per reference area, |J F^-T N|, of the
+        # closure's area state follow * u + (1 - follow) * u_area: the current state in
+        # stage 3 (a follower load), a fixed one in stages 4-6 (a dead load; module docstring).
+        self.follow = _constant(mesh, 1.0)
+        self.u_area = dolfinx.fem.Function(V)
+        Fa = ufl.Identity(d) + ufl.grad(self.follow * u + (1.0 - self.follow) * self.u_area)
+        Ja_N = ufl.det(Fa) * ufl.inv(Fa).T * N
+        nanson = ufl.sqrt(ufl.dot(Ja_N, Ja_N))
         R = (
             ufl.inner(P_d, ufl.grad(v)) * dx(DERMIS)
             + ufl.inner(P_s, ufl.grad(v)) * dx(SUBCUTIS)
@@ -404,6 +424,15 @@ class WoundModel:
             + self.tau * nanson * v[0] * ds(ZONE_RIGHT)
         )
         a = ufl.derivative(R, u, du)
+        # The potential whose derivative is R while the closure is a dead load (follow = 0).
+        Pi = (
+            psi_d * dx(DERMIS)
+            + psi_s * dx(SUBCUTIS)
+            - ufl.dot(ufl.dot(self.T_dermis, N), u) * ds(LATERAL_DERMIS)
+            - ufl.dot(ufl.dot(self.T_subcutis, N), u) * ds(LATERAL_SUBCUTIS)
+            - self.tau * nanson * u[0] * ds(ZONE_LEFT)
+            + self.tau * nanson * u[0] * ds(ZONE_RIGHT)
+        )
         q = ufl.TestFunction(compat.dg0_space(mesh))
         vm = von_mises(P_d, F) * q * dx(DERMIS) + von_mises(P_s, F) * q * dx(SUBCUTIS)
         jit_opts = compat.jit_options() if jit is None else jit
@@ -411,6 +440,7 @@ class WoundModel:
         self.R_form = compat.compile_form(R, jit_opts)
         self.a_form = compat.compile_form(a, jit_opts)
         self.vm_form = compat.compile_form(vm, jit_opts)
+        self.Pi_form = compat.compile_form(Pi, jit_opts)
         self.jit_time_s = time.perf_counter() - t0
         self.Q = compat.dg0_space(mesh)
         self._vm_vec = compat.create_vector(self.vm_form)
@@ -429,11 +459,27 @@ class WoundModel:
         if self._contact_on():
             self.contact.add_residual(b, self.u.x.array)  # type: ignore[union-attr]
 
+    def energy(self) -> float | None:
+        """Total potential (mN mm) at the current state, or None while a load follows the
+        deformation (the stage-3 closure traction), when there is none."""
+        if float(self.follow.value) != 0.0:
+            return None
+        e = compat.assemble_scalar(self.Pi_form)
+        if self._contact_on():
+            e += self.contact.energy(self.u.x.array)  # type: ignore[union-attr]
+        return e
+
     def refresh(self, tol: float) -> bool:
-        """Newton's hook at a converged state: re-search a frozen contact pairing (contact.py)."""
-        if not self._contact_on():
-            return False
-        return self.contact.refresh(self.u.x.array, tol)  # type: ignore[union-attr]
+        """Newton's hook at a converged state: re-search a frozen contact pairing (contact.py)
+        and move the closure traction's area state to the current one (module docstring);
+        True if either moved the forces by more than ``tol`` (mN), so Newton goes on."""
+        u = self.u.x.array
+        moved = self._contact_on() and self.contact.refresh(u, tol)  # type: ignore[union-attr]
+        if self.closure_follows and float(self.follow.value) == 0.0 and not moved:
+            r_old = self._residual_array()
+            self.u_area.x.array[:] = u
+            moved = bool(np.linalg.norm(self._residual_array() - r_old) > tol)
+        return moved
 
     def jacobian(self, A: PETSc.Mat) -> None:
         compat.assemble_matrix(A, self.a_form)
@@ -467,6 +513,7 @@ class WoundModel:
         self.T_dermis.value = np.zeros((3, 3))
         self.T_subcutis.value = np.zeros((3, 3))
         self.tau.value = 0.0
+        self.follow.value = 1.0
         self.tau_kPa = 0.0
         self.closure_force_mN = (0.0, 0.0)
         if self.contact is not None:
@@ -646,6 +693,7 @@ class WoundModel:
         # Left flank is pulled toward +x (f_left > 0), right toward -x (f_right < 0).
         self.tau_kPa = (f_left - f_right) / area if area > 0 else 0.0
         self.tau.value = self.tau_kPa
+        self.follow.value = 1.0
         offset = self._residual_array()
         rows = self._gauge_rows()
         u = self.u.x.array
@@ -686,6 +734,7 @@ class WoundModel:
                 if isinstance(c, FlankContact)
                 else settings.residual_growth
             ),
+            energy_merit=isinstance(c, FlankContact),
         )
         try:
             decades = np.log10(k_to / k_from)
@@ -734,6 +783,9 @@ class WoundModel:
         k_from = min(k_from, k_to)
         if stage == 4:
             u[:] = self.displacements[2]
+            # The closure traction becomes a dead load on the stage-2 area (module docstring).
+            self.u_area.x.array[:] = self.displacements[2]
+            self.follow.value = 0.0
         c.reset_timers()
         # Out-of-balance force released over the stage: stage 4, that of the stage-2 state
         # under the stage-3 loads (contact off); stages 5 and 6 start from an equilibrium
@@ -749,45 +801,37 @@ class WoundModel:
         def load(s: float) -> LoadState:
             c.k_V_kPa = k_from ** (1.0 - s) * k_to**s
             c.freeze(u)  # the pairing of the last converged state; Newton refreshes it
+            if self.closure_follows:
+                self.u_area.x.array[:] = u  # likewise the closure traction's area
             return LoadState(values, (1.0 - s) * offset)
 
         return k_from, k_to, load, scale
 
     def _stability(self, rows: np.ndarray, k_V_kPa: float) -> dict[str, float]:
-        """Lowest eigenvalue nearest zero (mN/mm) of the symmetric free-dof tangent at the
-        current state with penalty ``k_V_kPa``, with and without the closure traction's load
-        stiffness (NaN if it cannot be computed). The closure traction follows the deformed
-        area (Nanson), a non-conservative load: without its load stiffness the tangent is the
-        Hessian of the stored and penalty energies, whose sign decides the stability of the
-        body under that load held fixed."""
+        """Lowest eigenvalue nearest zero (mN/mm) of the free-dof tangent at the current state
+        with penalty ``k_V_kPa`` (NaN if it cannot be computed). In the contact stages every
+        load is dead (the closure traction too), so the tangent is the Hessian of the total
+        potential and its sign decides the stability of that equilibrium."""
         c = self.contact
         assert c is not None
         u = self.u.x.array
-        saved, tau = c.k_V_kPa, float(self.tau.value)
+        saved = c.k_V_kPa
         c.k_V_kPa = k_V_kPa
         c.freeze(u)
-        out = {}
         free = np.ones(self.A.getSize()[0], dtype=bool)
         free[rows] = False
         try:
-            for key, t in (
-                ("stability_min_eig_mN_per_mm", tau),
-                ("stability_min_eig_conservative_mN_per_mm", 0.0),
-            ):
-                self.tau.value = t
-                self.jacobian(self.A)
-                ai, aj, av = self.A.getValuesCSR()
-                K = scipy.sparse.csr_matrix((av, aj, ai), shape=self.A.getSize())
-                try:
-                    out[key] = float(lowest_eigenvalues(K, free)[0])
-                except ArithmeticError:
-                    out[key] = float("nan")
+            self.jacobian(self.A)
+            ai, aj, av = self.A.getValuesCSR()
+            K = scipy.sparse.csr_matrix((av, aj, ai), shape=self.A.getSize())
+            try:
+                eig = float(lowest_eigenvalues(K, free)[0])
+            except ArithmeticError:
+                eig = float("nan")
         finally:
-            self.tau.value = tau
             c.k_V_kPa = saved
             c.unfreeze()
-        out["stability_penalty_kPa"] = k_V_kPa
-        return out
+        return {"stability_min_eig_mN_per_mm": eig, "stability_penalty_kPa": k_V_kPa}
 
     def _lateral_force(self) -> float:
         """x-force (mN) of the healthy-skin traction on the x_max face: the load scale."""

@@ -37,6 +37,9 @@ class _ScriptedNewton:
         self.tried: list[float] = []
         self.s = 0.0
 
+    def reset(self) -> None:
+        self.gamma = 1.0
+
     def solve(self, rows: Any, values: Any, offset: Any, force_scale: float) -> NewtonResult:
         s = self.s
         self.tried.append(s)

@@ -196,10 +196,16 @@ class NewtonSolver:
         self._factored = False
         self._factored_rows = np.zeros(0, dtype=np.int32)
         self.gamma = 1.0
-        self._mu = 0.0  # the last shift that gave a descent step (`_shifted`)
+        self._mu = 0.0  # the last shift that gave a descent step (`_shifted`; see `reset`)
         # The force scale grows with the full residual norm (reactions included) unless this
         # is off; then it stays the ``force_scale`` given to `solve`.
         self.scale_from_residual = True
+
+    def reset(self) -> None:
+        """Forget the adaptive state (relaxation, shift): a stage's result must not depend on
+        what the solver did before it (the runner reuses one solver for many jobs)."""
+        self.gamma = 1.0
+        self._mu = 0.0
 
     # -- pieces ---------------------------------------------------------------------------
 
@@ -361,7 +367,7 @@ class NewtonSolver:
             if du is not None:
                 step = self._relax(u0, du, r_free, free, offset, limit, e0, prescribing)
             if isinstance(step, str) and e0 is not None:
-                step = self._shifted(u0, rows, rhs, r_free, free, offset, limit, e0)
+                step = self._shifted(u0, rhs, r_free, free, offset, e0)
                 if not isinstance(step, str):
                     t_fac += step.factor_time_s
             if isinstance(step, str):
@@ -429,12 +435,10 @@ class NewtonSolver:
     def _shifted(
         self,
         u0: np.ndarray,
-        rows: np.ndarray,
         rhs: np.ndarray,
         r_free: np.ndarray,
         free: np.ndarray,
         offset: np.ndarray | None,
-        limit: float,
         e0: float,
     ) -> _Step | str:
         """Modified Newton when the Newton step is no descent of the potential (the tangent
@@ -455,8 +459,8 @@ class NewtonSolver:
                 self.ksp.getPC().setUp()
                 du = self._linear_solve(rhs)
                 if du is not None:
-                    step = self._relax(u0, du, r_free, free, offset, limit, e0, False)
-                    if not isinstance(step, str) and float(np.dot(r_free, du)) < 0.0:
+                    step = self._relax(u0, du, r_free, free, offset, math.inf, e0, False)
+                    if not isinstance(step, str):  # a descent step, accepted by Armijo
                         self._mu = mu
                         _log.debug("newton: shifted tangent, mu=%.1e", mu)
                         return step._replace(factor_time_s=time.perf_counter() - t0)
@@ -511,7 +515,7 @@ def continuation(
     cuts_in_row = cuts = its = incs = 0
     times = np.zeros(4)
     last: NewtonResult | None = None
-    newton.gamma = 1.0
+    newton.reset()
     while s < 1.0 - 1e-12:
         s_next = min(1.0, s + ds)
         u_saved = u.copy()
@@ -535,7 +539,7 @@ def continuation(
         u[:] = u_saved
         cuts += 1
         cuts_in_row += 1
-        newton.gamma = 1.0
+        newton.reset()
         if cuts_in_row > st.max_load_cuts or its > st.max_stage_iterations:
             return ContinuationResult(
                 res.status, its, incs, cuts, s, res.residual_norm, res.min_det, *times

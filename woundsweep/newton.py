@@ -203,7 +203,7 @@ class NewtonSolver:
 
     def reset(self) -> None:
         """Forget the adaptive state (relaxation, shift): a stage's result must not depend on
-        what the solver did before it (the runner reuses one solver for many jobs)."""
+        what the solver did before it (earlier stages, or other jobs on a reused model)."""
         self.gamma = 1.0
         self._mu = 0.0
 

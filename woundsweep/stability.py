@@ -10,7 +10,8 @@ the two kinds of failure can be told apart (docs/design.md, "Known limits").
 The tangent is restricted to the free dofs (the Dirichlet rows and columns dropped) and
 symmetrised, (K + K^T) / 2. For a conservative problem that is the second variation of the
 energy, which decides stability. The contact stages are conservative since session 10: their
-closure traction is a dead load (`stages`). (Until then it followed the deformed area, whose
+closure traction is a dead load (`stages`; with ``closure_load: follower`` the tangent holds
+the traction's area state fixed, so its load stiffness is left out). (Until then it followed the deformed area, whose
 load stiffness made K non-symmetric: on a 45-degree paper job that alone made the lowest
 eigenvalue negative, -0.0057 mN/mm, while the material part along the same mode was +0.010.)
 Eigenvalues are in the tangent's units, mN/mm. They are

@@ -809,9 +809,10 @@ class WoundModel:
 
     def _stability(self, rows: np.ndarray, k_V_kPa: float) -> dict[str, float]:
         """Lowest eigenvalue nearest zero (mN/mm) of the free-dof tangent at the current state
-        with penalty ``k_V_kPa`` (NaN if it cannot be computed). In the contact stages every
-        load is dead (the closure traction too), so the tangent is the Hessian of the total
-        potential and its sign decides the stability of that equilibrium."""
+        with penalty ``k_V_kPa`` (NaN if it cannot be computed). With the dead closure load
+        every load is dead, so the tangent is the Hessian of the total potential and its sign
+        decides the stability of that equilibrium (with ``closure_load="follower"`` it is the
+        Hessian with the traction's area state held, its load stiffness left out)."""
         c = self.contact
         assert c is not None
         u = self.u.x.array

@@ -1,4 +1,4 @@
-"""Cost of one contact search against one residual assembly (woundsweep.contact, .depth).
+"""Cost of one contact search against one residual assembly (woundsweep.contact).
 
 Usage::
 
@@ -10,9 +10,7 @@ dropped before each), one contact evaluation of a frozen pairing (gaps, fades, f
 one assembly of the finite-element residual. Prints the contact points, the candidates found
 and the ratio search / residual: the contact stages search once per load increment and once
 per refresh, so this ratio and the number of searches set the detection share of a stage
-(target < 20 %, reported per stage by bench_solver.py). The material-depth model
-(``stages.contact_model: depth``) locates every point at every residual; its point location
-and its tangent are timed at the same state. Compare figures within one run.
+(target < 20 %, reported per stage by bench_solver.py). Compare figures within one run.
 """
 
 from __future__ import annotations
@@ -30,7 +28,8 @@ from pathlib import Path  # noqa: E402
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from woundsweep.geometry import GeometrySpec, build_mesh  # noqa: E402
+from woundsweep.mesh.build import build_mesh  # noqa: E402
+from woundsweep.mesh.spec import GeometrySpec  # noqa: E402
 
 __all__ = ["main"]
 
@@ -45,7 +44,8 @@ def _median_ms(fn, repeat: int = 15) -> float:  # type: ignore[no-untyped-def]
 
 
 def main() -> int:
-    from woundsweep.stages import JobMaterials, WoundModel
+    from woundsweep.model.materials import JobMaterials
+    from woundsweep.model.stages import WoundModel
 
     # Same geometry as bench_solver.py's "mid-size" job.
     T = 2.0
@@ -59,7 +59,7 @@ def main() -> int:
             return 1
     c = model.contact
     assert c is not None
-    u = model.u.x.array.copy()
+    u = model.u.copy()
 
     def search() -> None:
         c._found = None  # force a new search at the same state
@@ -77,31 +77,15 @@ def main() -> int:
     t_search = _median_ms(search)
     c.freeze(u)
     t_eval = _median_ms(evaluate)
-    t_res = _median_ms(lambda: model.residual(model.newton.rvec))
+    t_res = _median_ms(lambda: model.problem.residual(model.newton.rvec))
     c.unfreeze()
-    print(f"mid-size wedge: {len(model.cells)} cells; {n_points} contact points "
+    print(f"mid-size wedge: {len(model.domain.cells)} cells; {n_points} contact points "
           f"({[len(s.facets) for s in c.surfaces]} facets per flank), {n_found} candidates")  # fmt: skip
     print(f"pair search (both passes)      {t_search:7.1f} ms")
     print(f"contact forces, frozen pairing {t_eval:7.1f} ms")
     print(f"residual assembly (FEM)        {t_res:7.1f} ms")
     print(f"search / residual              {t_search / t_res:7.1f}")
 
-    # The material-depth model at the same state (same mesh, so the same node numbering).
-    d = WoundModel(mesh, contact_model="depth").contact
-    assert d is not None
-    d.k_V_kPa = c.k_V_kPa
-
-    def locate() -> None:
-        d._cache = None
-        d.state(u)
-
-    t_loc = _median_ms(locate)
-    n_eng = len(d.state(u).depth)
-    t_tan = _median_ms(lambda: d.tangent_coo(u), repeat=5)
-    print(f"depth model: {[len(r.cells) for r in d.regions]} master cells, {n_eng} points engaged")
-    print(f"point location (both passes)   {t_loc:7.1f} ms")
-    print(f"contact tangent                {t_tan:7.1f} ms")
-    print(f"location / residual            {t_loc / t_res:7.1f}")
     return 0
 
 

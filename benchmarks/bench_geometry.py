@@ -1,4 +1,4 @@
-"""Meshing time and cell counts of woundsweep.geometry.build_mesh.
+"""Meshing time and cell counts of woundsweep.mesh.build.build_mesh.
 
 Usage::
 
@@ -26,7 +26,9 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from woundsweep.geometry import PAPER_CELL_CAP, GeometrySpec, build_mesh  # noqa: E402
+from woundsweep.mesh.build import build_mesh  # noqa: E402
+from woundsweep.mesh.sizing import PAPER_CELL_CAP  # noqa: E402
+from woundsweep.mesh.spec import GeometrySpec  # noqa: E402
 
 __all__ = ["main"]
 
@@ -69,7 +71,7 @@ def run_fixed(repeats: int) -> None:
 
 
 def run_all() -> int:
-    from woundsweep.grid import expand, load_sweep
+    from woundsweep.sweep.grid import expand, load_sweep
 
     manifest = expand(load_sweep(ROOT / "sweeps" / "paper.yaml"))
     geoms = manifest.drop_duplicates("geometry_id").reset_index(drop=True)

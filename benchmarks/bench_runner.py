@@ -78,7 +78,7 @@ def main() -> int:
         )
 
         # Imports every real job pays after the fault switch (the solver stack, DOLFINx).
-        code = "import time; t = time.perf_counter(); import woundsweep.solve, dolfinx.fem; print(time.perf_counter() - t)"
+        code = "import time; t = time.perf_counter(); import woundsweep.model.job, dolfinx.fem; print(time.perf_counter() - t)"
         imports = sorted(
             float(
                 subprocess.run(
@@ -87,7 +87,7 @@ def main() -> int:
             )
             for _ in range(3)
         )[1]
-        print(f"  solver-stack imports (woundsweep.solve, DOLFINx) {imports:.2f} s/job")
+        print(f"  solver-stack imports (woundsweep.model.job, DOLFINx) {imports:.2f} s/job")
 
         # 2. Warm the JIT cache with one real job, untimed.
         warm = tmp_path / "warm"
@@ -116,8 +116,9 @@ def main() -> int:
                     f"  overhead (empty job + imports) / median job: {over:.2f} / {solve:.1f} s = "
                     f"{100 * over / solve:.1f}% (target < 10%)"
                 )
-                from woundsweep.grid import load_run
-                from woundsweep.store import JobOutcome, Store
+                from woundsweep.solverfile import read_solver_file
+                from woundsweep.sweep.grid import load_run
+                from woundsweep.sweep.store import JobOutcome, Store
 
                 # Store write alone, for one real result re-solved to a scratch file.
                 row = load_run(rd).manifest.iloc[int(jobs["job_index"].iloc[0])]
@@ -128,10 +129,8 @@ def main() -> int:
                     stdout=subprocess.DEVNULL, check=False,
                 )  # fmt: skip
                 if out.exists():
-                    from woundsweep.store import read_solver_output
-
                     a, b = (int(x) for x in args.stages.split("-"))
-                    so = read_solver_output(out, row["job_id"], (a, b))
+                    so = read_solver_file(out, row["job_id"], (a, b))
                     oc = JobOutcome("converged", "", 0, 1, 1.0, 1.0, 1.0, 1.0, None, 0.0, 1.0, so)
                     scratch = tmp_path / "scratch"
                     scratch.mkdir()

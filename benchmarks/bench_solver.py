@@ -35,7 +35,8 @@ from pathlib import Path  # noqa: E402
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from woundsweep.geometry import GeometrySpec, build_mesh  # noqa: E402
+from woundsweep.mesh.build import build_mesh  # noqa: E402
+from woundsweep.mesh.spec import GeometrySpec  # noqa: E402
 
 __all__ = ["main"]
 
@@ -88,7 +89,8 @@ def main(argv: list[str] | None = None) -> int:
     import ffcx.codegeneration.jit as ffcx_jit
 
     from woundsweep import compat
-    from woundsweep.stages import JobMaterials, WoundModel
+    from woundsweep.model.materials import JobMaterials
+    from woundsweep.model.stages import WoundModel
 
     compiled: list[str] = []
     real = ffcx_jit._compile_objects
@@ -130,7 +132,7 @@ def main(argv: list[str] | None = None) -> int:
         t0 = time.perf_counter()
         model = WoundModel(mesh)
         t_model = time.perf_counter() - t0
-        dofs = 3 * len(model.node_input)
+        dofs = model.domain.n_dofs
         print(f"== {name}: {len(mesh.cells)} cells, {dofs} dofs "
               f"(mesh {t_mesh:.2f} s, model+forms {t_model:.2f} s)")  # fmt: skip
         print(head)

@@ -52,7 +52,7 @@ PACKAGES=(python3-dolfinx-real python3-numpy python3-pandas
 OPTIONAL_PACKAGES=(python3-pyarrow python3-xgboost)
 # The gmsh wheel dlopens libGL.so.1 and friends: libgl1 is named itself because sid's
 # libglu1-mesa no longer pulls it in. gmsh comes from PyPI as on the host (Debian's
-# python3-gmsh lacks the Netgen optimiser that woundsweep.geometry enables), at the host
+# python3-gmsh lacks the Netgen optimiser that woundsweep.mesh enables), at the host
 # venv's version so both DOLFINx versions solve the same mesh (geometry.build_mesh is
 # deterministic for one gmsh version).
 host_gmsh=$("$SRC/.venv/bin/python" -c 'import gmsh; print(gmsh.__version__)' 2>/dev/null || true)
@@ -189,8 +189,8 @@ if [[ $mode == build ]]; then
 fi
 
 # ---- what runs inside the root (mode "test"): fem tests, then one demo job through all stages
-# "A-B" covering every stage the solver implements (all six once they exist).
-STAGES_PY='from woundsweep.stages import IMPLEMENTED_STAGES as s; print(f"{min(s)}-{max(s)}")'
+# "A-B" covering every stage of the model.
+STAGES_PY='from woundsweep.schema import STAGES as s; print(f"{min(s)}-{max(s)}")'
 in_root=$(cat <<'IN_ROOT'
 set -uo pipefail
 cd /src

@@ -8,9 +8,9 @@ and ``slurmd`` in the foreground as child processes, and waits until the node is
 by the pids this module started (never by name). Nothing outside ``root`` is configured: the
 client commands find the cluster through ``SLURM_CONF`` in `SlurmCluster.env`.
 
-Configuration as measured in ../shared/notes/environment.md: ``ProctrackType=proctrack/linuxproc``,
-``TaskPlugin=task/none``, ``SelectType=select/cons_tres``; the node is named after the host with
-its CPU count and a RealMemory a bit below the memory available now.
+Configuration: ``ProctrackType=proctrack/linuxproc``, ``TaskPlugin=task/none``,
+``SelectType=select/cons_tres``; the node is named after the host with its CPU count and a
+RealMemory a bit below the memory available now.
 `unavailable_reason()` says why a cluster cannot be started here (not Linux, not root, no
 apt-get, the install failed), for ``pytest.skip``.
 """

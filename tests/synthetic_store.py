@@ -1,10 +1,11 @@
 """Synthetic result stores in the real run-directory layout, for the analysis tests.
 
-`write_store` expands a sweep with `woundsweep.grid` (so the manifest is the real one),
-writes ``RUN_DIR/sweep.yaml`` and ``RUN_DIR/manifest.parquet``, and writes one row per job
-and stage (manifest columns + ``stage``, ``status``, ``failure_class`` and the `StageResult`
-fields of docs/design.md) as Parquet shards under ``RUN_DIR/results/``. The stress is
-whatever function the caller passes, so tests know the truth the model should find.
+`write_store` expands a sweep with `woundsweep.sweep.grid` (so the manifest is the real one),
+writes ``RUN_DIR/sweep.yaml`` and ``RUN_DIR/manifest.parquet``, makes one row per job and
+stage (manifest columns + ``stage``, ``status`` and the `StageResult` fields of
+docs/design.md) and writes them with `write_results` through the store's own writer
+(`Store.write_job`, no fields), so `read_results` validates them like a real run's. The
+stress is whatever function the caller passes, so tests know the truth the model should find.
 """
 
 from __future__ import annotations
@@ -17,7 +18,10 @@ import numpy as np
 import pandas as pd
 import yaml
 
-from woundsweep.grid import expand, parse_sweep
+from woundsweep.schema import ExitCode, FailureClass, StageResult, StageStatus
+from woundsweep.solverfile import SolverOutput
+from woundsweep.sweep.grid import expand, parse_sweep
+from woundsweep.sweep.store import JobOutcome, Store
 
 __all__ = [
     "SMALL_SWEEP",
@@ -25,15 +29,11 @@ __all__ = [
     "depth_level",
     "depth_stress",
     "random_stress",
+    "write_results",
     "write_store",
 ]
 
-STAGE_RESULT_COLUMNS = (
-    "stage", "status", "newton_iterations", "time_s", "p99_von_mises_kPa",
-    "p99_von_mises_nodal_kPa", "max_von_mises_kPa", "max_location_x_mm", "max_location_y_mm",
-    "max_location_z_mm", "closure_gap_mm", "min_J", "n_penetrating", "max_penetration_mm",
-    "contact_force_mN", "residual_norm", "dofs", "cells",
-)  # fmt: skip
+STAGE_RESULT_COLUMNS: tuple[str, ...] = StageResult._fields
 
 # 2 thicknesses x 3 subcutis x 6 (patch, width) pairs x 3 third factors x 2 shapes = 216
 # geometries x 3 skins x 3 orientations = 1,944 jobs x 6 stages = 11,664 rows.
@@ -113,7 +113,6 @@ def write_store(
     seed: int = 0,
     failed_fraction: float = 0.02,
     stages: tuple[int, ...] = (1, 2, 3, 4, 5, 6),
-    shards: int = 2,
 ) -> pd.DataFrame:
     """Write a synthetic run directory; return the full results table that was written.
 
@@ -132,8 +131,7 @@ def write_store(
     rows["stage"] = np.tile(np.asarray(stages, dtype=np.int64), len(manifest))
     n = len(rows)
     s = np.asarray(stress(rows, rng), dtype=float)
-    rows["status"] = "converged"
-    rows["failure_class"] = None
+    rows["status"] = StageStatus.CONVERGED.value
     rows["newton_iterations"] = rng.integers(3, 20, n)
     rows["time_s"] = rng.uniform(1.0, 10.0, n)
     rows["p99_von_mises_kPa"] = s
@@ -158,12 +156,46 @@ def write_store(
     after = failed_jobs[job] & (rows["stage"].to_numpy() > fail_stage[job])
     result_cols = [c for c in STAGE_RESULT_COLUMNS if c not in ("stage", "status", "dofs", "cells")]
     rows.loc[failed_here | after, result_cols] = np.nan
-    rows.loc[failed_here, "status"] = "max-iterations"
-    rows.loc[failed_here, "failure_class"] = "nonconvergence"
-    rows.loc[after, "status"] = "not-run"
-
-    results = rd / "results"
-    results.mkdir(exist_ok=True)
-    for i, part in enumerate(np.array_split(np.arange(n), shards)):
-        rows.iloc[part].to_parquet(results / f"part-{i:05d}.parquet", index=False)
+    rows.loc[failed_here, "status"] = StageStatus.MAX_ITERATIONS.value
+    rows.loc[after, "status"] = StageStatus.NOT_RUN.value
+    write_results(rd, rows)
     return rows
+
+
+def write_results(run_dir: str | Path, rows: pd.DataFrame) -> None:
+    """Write ``rows`` (manifest columns + stage results) as one result file per job.
+
+    Stages with status ``not-run`` are left out of the job's solver output, so the store
+    writes them as not run; a job whose stages did not all converge is ``not-converged``.
+    """
+    store = Store(run_dir)
+    fields = STAGE_RESULT_COLUMNS[2:]
+    records = rows.to_dict("records")
+    for idx in rows.groupby("job_id", sort=False).indices.values():
+        job = [records[i] for i in idx]
+        stages = {
+            int(r["stage"]): {"status": r["status"], **{f: r[f] for f in fields}}
+            for r in job
+            if r["status"] != StageStatus.NOT_RUN
+        }
+        converged = len(stages) == len(job) and all(
+            s["status"] == StageStatus.CONVERGED for s in stages.values()
+        )
+        outcome = JobOutcome(
+            failure_class=(
+                FailureClass.CONVERGED if converged else FailureClass.NOT_CONVERGED
+            ).value,
+            failure_detail="",
+            exit_code=int(ExitCode.OK if converged else ExitCode.NOT_CONVERGED),
+            attempts=1,
+            wall_time_s=1.0,
+            cpu_time_s=1.0,
+            total_wall_time_s=1.0,
+            total_cpu_time_s=1.0,
+            max_rss_MiB=None,
+            started_at=0.0,
+            finished_at=1.0,
+            output=SolverOutput(Path(run_dir), {}, stages),
+        )
+        span = (min(int(r["stage"]) for r in job), max(int(r["stage"]) for r in job))
+        store.write_job(job[0], outcome, span, "none", "1/1")

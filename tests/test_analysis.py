@@ -3,6 +3,7 @@ model on synthetic stores whose truth is known (stress = f(depth) + noise, or pu
 
 from __future__ import annotations
 
+import functools
 import math
 from pathlib import Path
 
@@ -13,6 +14,7 @@ from synthetic_store import SMALL_SWEEP, depth_stress, random_stress, write_stor
 
 from woundsweep.analysis import (
     FEATURES,
+    REQUIRED_COLUMNS,
     ModelSettings,
     assign_quantiles,
     encode_features,
@@ -29,8 +31,10 @@ from woundsweep.analysis import (
     skin_codes,
     stiff_vs_soft,
 )
-from woundsweep.errors import AnalysisError
-from woundsweep.grid import expand, parse_sweep
+from woundsweep.analysis.data import require_columns
+from woundsweep.errors import AnalysisError, StoreError
+from woundsweep.sweep.grid import expand, parse_sweep
+from woundsweep.sweep.results import result_schema
 
 # Few, fast rounds: the assertions are about what the data allow, not about tuning.
 FAST = {"n_estimators": 40, "learning_rate": 0.3, "early_stopping_rounds": 5, "nthread": 2}
@@ -206,12 +210,31 @@ def test_settings_layers_and_validation() -> None:
 # -- loading -------------------------------------------------------------------------------
 
 
+def test_required_columns_are_result_columns() -> None:
+    assert set(REQUIRED_COLUMNS) <= set(result_schema().names)
+
+
 def test_load_results_names_missing_columns(tmp_path: Path) -> None:
-    rows = write_store(tmp_path, sweep=_tiny_sweep(), shards=1)
-    rows.drop(columns=["stage", "max_location_z_mm"]).to_parquet(
-        tmp_path / "results" / "part-00000.parquet"
-    )
+    rows = write_store(tmp_path, sweep=_tiny_sweep())
+    assert load_results(tmp_path).shape == (len(rows), len(result_schema()))
     with pytest.raises(AnalysisError, match=r"missing columns \['stage', 'max_location_z_mm'\]"):
+        require_columns(rows.drop(columns=["stage", "max_location_z_mm"]), "rows")
+    # A result file without them is refused by the store's reader, naming the file.
+    job = rows["job_id"].iloc[0]
+    path = tmp_path / "results" / f"job-{job}.parquet"
+    rows[rows["job_id"] == job].drop(columns=["stage", "max_location_z_mm"]).to_parquet(path)
+    with pytest.raises(StoreError, match=rf"{path.name}: corrupt result file \(columns differ"):
+        load_results(tmp_path)
+
+
+def test_load_results_without_result_files(tmp_path: Path) -> None:
+    write_store(tmp_path, sweep=_tiny_sweep())
+    for p in (tmp_path / "results").iterdir():
+        p.unlink()
+    with pytest.raises(AnalysisError, match="holds no result files"):
+        load_results(tmp_path)
+    (tmp_path / "results").rmdir()
+    with pytest.raises(AnalysisError, match="no result store"):
         load_results(tmp_path)
 
 
@@ -242,10 +265,16 @@ def _tiny_sweep() -> dict:
 # -- the model on stores with a known truth ------------------------------------------------
 
 
-def _fit(store: Path, scheme: str, **overrides: object):
+@functools.cache
+def _rows(store: Path) -> tuple[pd.DataFrame, dict[str, float], np.ndarray]:
+    """The store's used rows, skin codes and model matrix, read once per store."""
     rows, _ = select_rows(load_results(store))
     skins = skin_codes(store)
-    X = encode_features(rows, skins)
+    return rows, skins, encode_features(rows, skins)
+
+
+def _fit(store: Path, scheme: str, **overrides: object):
+    rows, skins, X = _rows(store)
     return fit_scheme(scheme, rows, X, skins, resolve_settings(FAST, overrides)), rows, X
 
 
@@ -310,7 +339,7 @@ def test_same_seed_same_model_other_seed_other_split(depth_store: Path) -> None:
 
 
 def test_feature_matrix_encoding(depth_store: Path) -> None:
-    rows, _ = select_rows(load_results(depth_store))
+    rows, _, _ = _rows(depth_store)
     X = encode_features(rows, {"soft": 10.7, "normal": 21.3, "stiff": 42.6})
     col = {f: i for i, f in enumerate(FEATURES)}
     wedge = rows["wound_shape"].to_numpy() == "wedge"

@@ -12,10 +12,11 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-from synthetic_store import SMALL_SWEEP, depth_stress, write_store
+from synthetic_store import SMALL_SWEEP, depth_stress, write_results, write_store
 
 from woundsweep.cli import main
-from woundsweep.grid import DEFAULTS
+from woundsweep.sweep.grid import DEFAULTS
+from woundsweep.sweep.store import read_results
 
 # 108 geometries x 3 skins x 2 orientations x 6 stages = 3,888 rows.
 CLI_SWEEP = {
@@ -82,7 +83,13 @@ def analyzed(store: Path, tmp_path_factory: pytest.TempPathFactory) -> tuple[Pat
     return rd, buf.getvalue()
 
 
-def test_analyze_writes_every_output(analyzed: tuple[Path, str]) -> None:
+@pytest.fixture(scope="module")
+def results(analyzed: tuple[Path, str]) -> pd.DataFrame:
+    """The analyzed store's rows, read once through the store's validated reader."""
+    return read_results(analyzed[0])
+
+
+def test_analyze_writes_every_output(analyzed: tuple[Path, str], results: pd.DataFrame) -> None:
     rd, out = analyzed
     assert "random split" in out and "geometry split" in out and "test macro AUC" in out
     a = rd / "analysis"
@@ -95,7 +102,7 @@ def test_analyze_writes_every_output(analyzed: tuple[Path, str]) -> None:
     # Settings: the sweep's analysis section, overridden by --param.
     assert metrics["settings"]["max_depth"] == 4
     assert metrics["settings"]["n_estimators"] == 30
-    written = pd.read_parquet(rd / "results")
+    written = results
     assert metrics["rows"]["store_rows"] == len(written)
     assert metrics["rows"]["used_rows"] == int((written["status"] == "converged").sum())
     for scheme in ("random", "geometry"):
@@ -148,12 +155,15 @@ def _predict_args(row: pd.Series) -> list[str]:
 
 @pytest.mark.parametrize("shape", ["wedge", "cylindrical"])
 def test_predict_returns_the_model_class_for_a_training_row(
-    analyzed: tuple[Path, str], shape: str, capsys: pytest.CaptureFixture[str]
+    analyzed: tuple[Path, str],
+    results: pd.DataFrame,
+    shape: str,
+    capsys: pytest.CaptureFixture[str],
 ) -> None:
     import xgboost as xgb
 
     rd = analyzed[0]
-    rows = pd.read_parquet(rd / "results")
+    rows = results
     row = rows[(rows["wound_shape"] == shape) & (rows["status"] == "converged")].iloc[7]
     rc, out, err = run_cli(capsys, "predict", rd, *_predict_args(row), "--json")
     assert rc == 0, err
@@ -184,10 +194,10 @@ def test_predict_returns_the_model_class_for_a_training_row(
 
 
 def test_predict_refuses_or_flags_extrapolation(
-    analyzed: tuple[Path, str], capsys: pytest.CaptureFixture[str]
+    analyzed: tuple[Path, str], results: pd.DataFrame, capsys: pytest.CaptureFixture[str]
 ) -> None:
     rd = analyzed[0]
-    rows = pd.read_parquet(rd / "results")
+    rows = results
     row = rows[rows["wound_shape"] == "wedge"].iloc[0].copy()
     row["dermal_thickness_mm"] = 3.0  # trained on 1 mm only
     rc, _, err = run_cli(capsys, "predict", rd, *_predict_args(row))
@@ -200,9 +210,9 @@ def test_predict_refuses_or_flags_extrapolation(
 
 
 def test_predict_refuses_the_other_shapes_factor(
-    analyzed: tuple[Path, str], capsys: pytest.CaptureFixture[str]
+    analyzed: tuple[Path, str], results: pd.DataFrame, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    rows = pd.read_parquet(analyzed[0] / "results")
+    rows = results
     row = rows[rows["wound_shape"] == "wedge"].iloc[0]
     rc, _, err = run_cli(
         capsys, "predict", analyzed[0], *_predict_args(row), "--wound-aspect-factor", "0.1"
@@ -231,17 +241,24 @@ def test_analyze_without_results(tmp_path: Path, capsys: pytest.CaptureFixture[s
     assert_refused(*run_cli(capsys, "analyze", tmp_path)[::2], "no result store")
 
 
-def test_analyze_names_missing_columns(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    rows = write_store(tmp_path, sweep=TINY, shards=1)
-    rows.drop(columns=["p99_von_mises_kPa"]).to_parquet(tmp_path / "results" / "part-00000.parquet")
+def test_analyze_names_a_result_file_with_missing_columns(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    rows = write_store(tmp_path, sweep=TINY)
+    job = rows["job_id"].iloc[0]
+    rows[rows["job_id"] == job].drop(columns=["p99_von_mises_kPa"]).to_parquet(
+        tmp_path / "results" / f"job-{job}.parquet"
+    )
     assert_refused(
-        *run_cli(capsys, "analyze", tmp_path)[::2], "missing columns", "p99_von_mises_kPa"
+        *run_cli(capsys, "analyze", tmp_path)[::2],
+        f"job-{job}.parquet",
+        "columns differ from the result schema",
     )
 
 
 def test_analyze_without_converged_rows(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    rows = write_store(tmp_path, sweep=TINY, shards=1)
-    rows.assign(status="diverged").to_parquet(tmp_path / "results" / "part-00000.parquet")
+    rows = write_store(tmp_path, sweep=TINY)
+    write_results(tmp_path, rows.assign(status="diverged"))
     assert_refused(*run_cli(capsys, "analyze", tmp_path)[::2], "no converged rows")
 
 

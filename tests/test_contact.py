@@ -14,15 +14,12 @@ import numpy as np
 import pytest
 from box_mesh import boundary_facets, box_tets
 
-from woundsweep.contact import (
-    GPA_TO_KPA,
-    FlankContact,
+from woundsweep.contact import GPA_TO_KPA, FlankContact, orient_outward, split_wound_flanks
+from woundsweep.contact.geometry import (
     barycentric_derivatives,
     fade_weight,
     gap_derivatives,
-    orient_outward,
     point_triangle_distance,
-    split_wound_flanks,
 )
 
 # -- helpers -----------------------------------------------------------------------------------

@@ -31,13 +31,11 @@ import pytest
 from box_mesh import boundary_facets, box_tets
 
 from woundsweep.contact import GPA_TO_KPA, ContactSummary, FlankContact, orient_outward
-from woundsweep.depth import WOUND_OPTIONS, DepthContact
-from woundsweep.materials import Fung, first_piola
+from woundsweep.model.materials import Fung, first_piola
 
 pytestmark = pytest.mark.fem
 
 N_BOX = 3  # grid boxes per block edge
-DEPTH_PRELOAD_MM = 1e-6  # depth model's starting overlap (below the loaded overlap at 1 GPa)
 PRESSURE_KPA = 10.0
 AREA_MM2 = 1.0
 K_V_GPA = (1.0, 5.0, 100.0)
@@ -59,11 +57,9 @@ def uniaxial_state(material: Fung, p: float) -> tuple[float, float]:
 
 
 class Blocks:
-    """The two-block problem; implements `woundsweep.newton.NonlinearProblem`."""
+    """The two-block problem; implements `woundsweep.solver.NonlinearProblem`."""
 
-    def __init__(
-        self, n: int, material: Fung, p: float, n_right: int | None = None, model: str = "surface"
-    ) -> None:
+    def __init__(self, n: int, material: Fung, p: float, n_right: int | None = None) -> None:
         import dolfinx.fem
         import ufl
 
@@ -127,15 +123,7 @@ class Blocks:
         left = orient_outward(X, self.cell_nodes, input_node[left_wall])
         right = orient_outward(X, self.cell_nodes, input_node[right_wall])
         depth = 0.5 / max(n, m)
-        self.contact: Any
-        if model == "surface":
-            self.contact = FlankContact(X, left, right, max_depth_mm=depth)
-        else:
-            side = self.in_right[self.cell_nodes].all(axis=1)
-            surface = np.vstack([left, right])
-            self.contact = DepthContact(
-                X, self.cell_nodes, side, surface, max_depth_mm=depth, **WOUND_OPTIONS
-            )
+        self.contact = FlankContact(X, left, right, max_depth_mm=depth)
 
     # -- NonlinearProblem ---------------------------------------------------------------------
 
@@ -153,6 +141,12 @@ class Blocks:
 
         compat.assemble_matrix(A, self.a_form)
         self.contact.add_jacobian(A, self.u.x.array)
+
+    def energy(self) -> float | None:
+        return None  # the dead load's work is not in a form: no potential to merit
+
+    def refresh(self, tol: float) -> bool:
+        return False  # the pairing is live (never frozen)
 
     def _grad(self, w: np.ndarray) -> np.ndarray:
         W = w.reshape(-1, 3)[self.cell_nodes]
@@ -178,28 +172,23 @@ class Run(NamedTuple):
 
 
 @functools.cache
-def solve_blocks(n_right: int, model: str = "surface") -> dict[str, Any]:
-    """Solve the load at k_V = 1 GPa (load continuation from the touching state; the depth
-    model from DEPTH_PRELOAD_MM), then 5 and 100 GPa from the previous state. R has
-    ``n_right``^2 grid boxes across x = 0; ``model`` is "surface" (`FlankContact`) or "depth"
-    (`DepthContact`)."""
+def solve_blocks(n_right: int) -> dict[str, Any]:
+    """Solve the load at k_V = 1 GPa (load continuation from the touching state), then 5 and
+    100 GPa from the previous state. R has ``n_right``^2 grid boxes across x = 0."""
     import ufl
 
-    from woundsweep.newton import LoadState, NewtonSettings, NewtonSolver, continuation
+    from woundsweep.solver import LoadState, NewtonSettings, NewtonSolver
+    from woundsweep.solver.continuation import continuation
 
     material = dataclasses.replace(Fung.normal(0.0), a1=ufl.as_vector((1.0, 0.0, 0.0)))
     t0 = time.perf_counter()
-    prob = Blocks(N_BOX, material, PRESSURE_KPA, n_right=n_right, model=model)
+    prob = Blocks(N_BOX, material, PRESSURE_KPA, n_right=n_right)
     t_build = time.perf_counter() - t0
     u = prob.u.x.array
     # The start: the faces touch (g = 0 < touch_rel h), so every contact point is engaged and
-    # R's rigid motion in x is restrained from the first Newton step on. The depth model's
-    # engagement ramp has no stiffness at depth 0 (WOUND_OPTIONS), so there R starts pushed
-    # into L by DEPTH_PRELOAD_MM, below the loaded overlap.
-    if model == "depth":
-        u.reshape(-1, 3)[prob.in_right, 0] = -DEPTH_PRELOAD_MM
+    # R's rigid motion in x is restrained from the first Newton step on.
     prob.contact.k_V_kPa = K_V_GPA[0] * GPA_TO_KPA
-    start = prob.contact.pairs(u) if model == "surface" else prob.contact.state(u)
+    start = prob.contact.pairs(u)
     newton = NewtonSolver(prob, prob.A, NewtonSettings())
     zeros = np.zeros(len(prob.rows))
     scale = float(np.linalg.norm(prob.f_ext))
@@ -220,7 +209,7 @@ def solve_blocks(n_right: int, model: str = "surface") -> dict[str, Any]:
         prob.residual(b)
         reaction = float(b.getArray(readonly=True)[wall_x].sum())
         runs[k] = Run(status, its, prob.contact.summary(u), u.copy(), reaction, dt)
-    name = ("matching" if n_right == N_BOX else "non-matching") + f" ({model})"
+    name = "matching" if n_right == N_BOX else "non-matching"
     print(f"\n{name}: build (mesh, JIT, contact setup) {t_build:.1f} s")
     for k, run in runs.items():
         s = run.summary

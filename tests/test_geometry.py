@@ -1,4 +1,4 @@
-"""woundsweep.geometry: analytic volumes and areas, tags, symmetry, size law, determinism, errors."""
+"""woundsweep.mesh: analytic volumes and areas, tags, symmetry, size law, determinism, errors."""
 
 from __future__ import annotations
 
@@ -13,16 +13,10 @@ import pandas as pd
 import pytest
 
 from woundsweep.errors import GeometryError
-from woundsweep.geometry import (
-    CELL_TAGS,
-    FACET_TAGS,
-    PAPER_CELL_CAP,
-    TAGS,
-    GeometrySpec,
-    MeshData,
-    build_mesh,
-    mesh_size_mm,
-)
+from woundsweep.mesh.build import MeshData, build_mesh
+from woundsweep.mesh.sizing import PAPER_CELL_CAP, mesh_size_mm
+from woundsweep.mesh.spec import GeometrySpec
+from woundsweep.schema import CELL_TAGS, FACET_TAGS, TAGS
 
 # Coarse but varied: both shapes, wounds inside the dermis, touching the interface
 # (cylinder tangent to it, wedge apex on it) and cutting into the subcutis.
@@ -239,7 +233,8 @@ def test_identical_meshes_across_processes(meshes: dict[str, MeshData]) -> None:
     name = "cyl-a0.2-dermis"
     code = (
         "import hashlib, sys\n"
-        "from woundsweep.geometry import GeometrySpec, build_mesh\n"
+        "from woundsweep.mesh.build import build_mesh\n"
+        "from woundsweep.mesh.spec import GeometrySpec\n"
         "m = build_mesh(GeometrySpec.cylindrical(1.0, 1.0, 2.0, 1.0, 0.2, 0.5))\n"
         "h = hashlib.sha256()\n"
         "for a in m[:5]: h.update(a.tobytes())\n"
@@ -302,7 +297,7 @@ def _paper_row(manifest, **where):
 def test_cell_cap_holds_for_extreme_paper_geometries() -> None:
     from pathlib import Path
 
-    from woundsweep.grid import expand, load_sweep
+    from woundsweep.sweep.grid import expand, load_sweep
 
     man = expand(load_sweep(Path(__file__).resolve().parent.parent / "sweeps" / "paper.yaml"))
     finest = man[man["mesh_size_factor"] == man["mesh_size_factor"].max()]

@@ -11,7 +11,7 @@ import pytest
 import yaml
 
 from woundsweep.errors import SweepError
-from woundsweep.grid import MANIFEST_COLUMNS, expand, load_sweep, parse_sweep
+from woundsweep.sweep.grid import MANIFEST_COLUMNS, expand, load_sweep, parse_sweep
 
 ROOT = Path(__file__).resolve().parent.parent
 PAPER = ROOT / "sweeps" / "paper.yaml"
@@ -154,8 +154,16 @@ def test_settings_defaults_are_table_2() -> None:
 
 def test_contact_model_setting() -> None:
     data = yaml.safe_load(Path(DEMO).read_text())
+    assert parse_sweep(data).stages["contact_model"] == "surface"
+    data["stages"] = {"contact_model": "surface"}
+    assert parse_sweep(data).stages["contact_model"] == "surface"
     data["stages"] = {"contact_model": "depth"}
-    assert parse_sweep(data).stages["contact_model"] == "depth"
+    with pytest.raises(SweepError) as err:
+        parse_sweep(data)
+    assert str(err.value).endswith(
+        "stages.contact_model: 'depth' was removed; the only contact model is 'surface'"
+    )
+    assert "\n" not in str(err.value)
     data["stages"] = {"contact_model": 3}
     with pytest.raises(SweepError, match="stages.contact_model"):
         parse_sweep(data)

@@ -1,7 +1,7 @@
 """Materials: stresses against an independent numpy transcription of the paper's energies.
 
 The reference energies below are written from eqs. 10-11 of the paper, not from
-woundsweep.materials, and differentiated by central finite differences.
+woundsweep.model.materials, and differentiated by central finite differences.
 """
 
 from __future__ import annotations
@@ -11,14 +11,21 @@ import math
 import numpy as np
 import pytest
 
-from woundsweep.materials import (
-    FLYNN_SKIN_TYPES,
+from woundsweep.model.materials import (
     Fung,
     MooneyRivlin,
     first_piola,
     homogeneous_state,
     von_mises,
 )
+from woundsweep.model.parameters import SKIN_TYPES as TABLE2_SKIN_TYPES
+
+# Table 2 entries in the short names of the reference energies below.
+FLYNN_SKIN_TYPES = {
+    name: {"c": e["c_kPa"], "mu": tuple(e["mu_kPa"]), "lambda11": e["lambda11_kPa"],
+           "lambda_other": e["lambda_other_kPa"], "K": e["K_kPa"], "tsf": e["tsf"]}
+    for name, e in TABLE2_SKIN_TYPES.items()
+}  # fmt: skip
 
 SKIN_TYPES = ("normal", "stiff", "soft")
 ANGLES = (0.0, 45.0, 90.0)

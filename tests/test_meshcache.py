@@ -1,4 +1,4 @@
-"""woundsweep.meshcache: reuse, validation, rebuild of damaged or stale files, atomic writes."""
+"""woundsweep.mesh.cache: reuse, validation, rebuild of damaged or stale files, atomic writes."""
 
 from __future__ import annotations
 
@@ -9,10 +9,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import woundsweep.meshcache as meshcache
+import woundsweep.mesh.cache as meshcache
 from woundsweep.errors import GeometryError, StoreError
-from woundsweep.geometry import GeometrySpec, MeshData, build_mesh
-from woundsweep.meshcache import get_mesh, load_mesh, mesh_path, save_mesh
+from woundsweep.mesh.build import MeshData, build_mesh
+from woundsweep.mesh.cache import get_mesh, load_mesh, mesh_path, save_mesh
+from woundsweep.mesh.spec import GeometrySpec
 
 GID = "0123456789abcdef"
 SPEC = GeometrySpec.cylindrical(1.0, 1.0, 1.5, 1.0, 0.2, 0.3)

@@ -1,4 +1,5 @@
-"""Load continuation (woundsweep.newton.continuation) against a scripted Newton solver."""
+"""Load continuation (woundsweep.solver.continuation) against a scripted Newton solver, and
+Newton's energy merit on a double well."""
 
 from __future__ import annotations
 
@@ -7,14 +8,11 @@ from typing import Any
 import numpy as np
 import pytest
 
-from woundsweep.newton import (
-    CONVERGED,
-    MAX_ITERATIONS,
-    LoadState,
-    NewtonResult,
-    NewtonSettings,
-    continuation,
-)
+from woundsweep.schema import StageStatus
+from woundsweep.solver.continuation import LoadState, continuation
+from woundsweep.solver.settings import NewtonSettings
+
+CONVERGED, MAX_ITERATIONS = StageStatus.CONVERGED, StageStatus.MAX_ITERATIONS
 
 
 class _Problem:
@@ -40,7 +38,11 @@ class _ScriptedNewton:
     def reset(self) -> None:
         self.gamma = 1.0
 
-    def solve(self, rows: Any, values: Any, offset: Any, force_scale: float) -> NewtonResult:
+    def solve(
+        self, rows: Any, values: Any, offset: Any, force_scale: float, policy: Any = None
+    ) -> Any:
+        from woundsweep.solver.newton import NewtonResult
+
         s = self.s
         self.tried.append(s)
         ok = s <= self.limit + 1e-12
@@ -89,7 +91,7 @@ def test_failures_in_a_row_end_the_stage_after_max_load_cuts() -> None:
 
 class _DoubleWell:
     """E(u) = sum_i (u_i^2 - 1)^2 / 4 + c (u_0 - u_1)^2 / 2: minima at u = +-(1, 1), a
-    maximum at 0 (tangent -1 + coupling). Protocol of `woundsweep.newton.NonlinearProblem`."""
+    maximum at 0 (tangent -1 + coupling). Protocol of `woundsweep.solver.NonlinearProblem`."""
 
     c = 0.1
 
@@ -117,6 +119,9 @@ class _DoubleWell:
         u = self.u
         return float(np.sum((u**2 - 1) ** 2) / 4 + self.c * (u[0] - u[1]) ** 2 / 2)
 
+    def refresh(self, tol: float) -> bool:
+        return False
+
     def min_det(self, u: np.ndarray) -> float:
         return 1.0
 
@@ -136,15 +141,15 @@ def test_energy_merit_leaves_an_unstable_equilibrium(energy_merit: bool) -> None
     minimum (1, 1), and every accepted step lowers E."""
     from petsc4py import PETSc
 
-    from woundsweep.newton import NewtonSolver
+    from woundsweep.solver.newton import NewtonSolver, Policy
 
     p = _DoubleWell([0.05, 0.05])
     A = PETSc.Mat().createAIJ([2, 2], nnz=2)
     A.setUp()
     A.setValues([0, 1], [0, 1], np.ones(4))
     A.assemble()
-    st = NewtonSettings(rtol=0.0, atol=1e-10, stol=1e-9, energy_merit=energy_merit)
-    newton = NewtonSolver(p, A, st)  # type: ignore[arg-type]
+    st = NewtonSettings(rtol=0.0, atol=1e-10, stol=1e-9)
+    newton = NewtonSolver(p, A, st)
     energies: list[float] = []
     real = newton._relax
 
@@ -155,7 +160,8 @@ def test_energy_merit_leaves_an_unstable_equilibrium(energy_merit: bool) -> None
 
     newton._relax = relax  # type: ignore[method-assign]
     e_start = p.energy()
-    res = newton.solve(np.zeros(0, dtype=np.int32), np.zeros(0))
+    policy = Policy(st, energy_merit=energy_merit)
+    res = newton.solve(np.zeros(0, dtype=np.int32), np.zeros(0), policy=policy)
     assert res.status == CONVERGED
     if energy_merit:
         np.testing.assert_allclose(p.u, [1.0, 1.0], atol=1e-8)

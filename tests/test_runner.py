@@ -23,15 +23,11 @@ import yaml
 
 from woundsweep.cli import COMMANDS
 from woundsweep.faults import FaultSpec, parse_faults
-from woundsweep.grid import load_run
-from woundsweep.runner import (
-    _JIT_TIMEOUT_RE,
-    _lock_state,
-    clear_stale_jit_locks,
-    stability_note,
-)
-from woundsweep.shards import partition
-from woundsweep.store import read_results
+from woundsweep.sweep.classify import stability_note
+from woundsweep.sweep.grid import load_run
+from woundsweep.sweep.jitlock import JIT_TIMEOUT_RE, clear_stale_jit_locks, lock_state
+from woundsweep.sweep.shards import partition
+from woundsweep.sweep.store import read_results
 
 WS = [sys.executable, "-m", "woundsweep"]
 needs_solve = pytest.mark.skipif(
@@ -189,17 +185,17 @@ def test_stale_jit_lock_from_a_killed_compile_is_recovered(tmp_path: Path) -> No
         [sys.executable, "-c", _COMPILE, str(cache)], capture_output=True, text=True
     )
     assert res.returncode != 0 and "TimeoutError" in res.stderr
-    m = _JIT_TIMEOUT_RE.search(res.stderr)
+    m = JIT_TIMEOUT_RE.search(res.stderr)
     assert m and Path(m.group(1)) == locks[0]
     time.sleep(1.1)
-    assert _lock_state(locks[0], stale_after_s=1.0) == "stale"
+    assert lock_state(locks[0], stale_after_s=1.0) == "stale"
     assert clear_stale_jit_locks(cache, stale_after_s=1.0) == locks
     res = subprocess.run(
         [sys.executable, "-c", _COMPILE, str(cache)], capture_output=True, text=True
     )
     assert res.returncode == 0 and "compiled" in res.stdout
     assert locks[0].with_suffix(".c.cached").exists()
-    assert _lock_state(locks[0], stale_after_s=1.0) == "released"
+    assert lock_state(locks[0], stale_after_s=1.0) == "released"
 
 
 # ---- the runner with real `woundsweep solve` jobs -----------------------------------------

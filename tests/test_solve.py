@@ -13,7 +13,8 @@ import pytest
 import yaml
 
 from woundsweep.errors import SolverError
-from woundsweep.solve import StageResult, parse_stage_range, stress_summary
+from woundsweep.model.job import stress_summary
+from woundsweep.schema import StageResult, parse_stage_range
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -73,11 +74,11 @@ def test_parse_stage_range() -> None:
     assert parse_stage_range("4-6") == (4, 6)
     for bad in ("0-2", "3-1", "x", "1-7", "1-2-3"):
         with pytest.raises(SolverError):
-            parse_stage_range(bad)
+            parse_stage_range(bad, SolverError)
 
 
 def test_stage_result_fields_match_the_design_contract() -> None:
-    from woundsweep.store import STAGE_FIELDS
+    from woundsweep.sweep.results import STAGE_FIELDS
 
     assert set(StageResult._fields) == {"stage", "status", *STAGE_FIELDS}
 
@@ -108,8 +109,8 @@ def test_solve_writes_the_design_output(run_dir: Path, capsys: pytest.CaptureFix
     import h5py
 
     from woundsweep.cli import main
-    from woundsweep.grid import load_run
-    from woundsweep.store import read_solver_output
+    from woundsweep.solverfile import read_solver_file
+    from woundsweep.sweep.grid import load_run
 
     out = run_dir / "job0.h5"
     assert main(["solve", str(run_dir), "--job", "0", "--out", str(out)]) == 0
@@ -142,7 +143,7 @@ def test_solve_writes_the_design_output(run_dir: Path, capsys: pytest.CaptureFix
     assert rim.sum() == 2
     np.testing.assert_allclose(pts[rim, 0] + u2[rim, 0], w / 2, atol=1e-5)  # float32 output
     # The store accepts the file.
-    got = read_solver_output(out, str(row["job_id"]), (1, 6))
+    got = read_solver_file(out, str(row["job_id"]), (1, 6))
     assert sorted(got.stages) == [1, 2, 3, 4, 5, 6]
 
 
@@ -191,7 +192,7 @@ def test_fault_switch_fires_before_solving(run_dir: Path) -> None:
 
 
 def _different_job(run_dir: Path) -> int:
-    from woundsweep.grid import load_run
+    from woundsweep.sweep.grid import load_run
 
     m = load_run(run_dir).manifest
     first = m.iloc[0]
@@ -211,7 +212,7 @@ def test_second_job_with_other_parameters_compiles_nothing(
     compiled forms (counted at FFCx's compile step, which a cache hit never reaches)."""
     import ffcx.codegeneration.jit as ffcx_jit
 
-    from woundsweep.solve import solve_job
+    from woundsweep.model.job import solve_job
 
     compiled: list[str] = []
     real = ffcx_jit._compile_objects

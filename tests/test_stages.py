@@ -1,7 +1,7 @@
 """Stages 1-3 on coarse meshes: equivalence of the lateral conditions, symmetry, closure.
 
 Unwounded patches are structured tetrahedral boxes built here, tagged from midpoints; wounded
-ones come from woundsweep.geometry (coarsest size factor).
+ones come from woundsweep.mesh (coarsest size factor).
 """
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ from typing import NamedTuple
 import numpy as np
 import pytest
 
-from woundsweep.materials import homogeneous_state
+from woundsweep.model.materials import homogeneous_state
 
 pytestmark = pytest.mark.fem
 
@@ -64,7 +64,7 @@ def box_patch(n_xy: int = 6, rotate: bool = False) -> Patch:
 
 def homogeneous_field(points: np.ndarray, skin: str, angle: float) -> np.ndarray:
     """Displacement of the per-layer homogeneous pre-stretch (bottom fixed at z = -T_TOTAL)."""
-    from woundsweep.stages import JobMaterials
+    from woundsweep.model.materials import JobMaterials
 
     mats = JobMaterials.table2(skin, angle)
     l_d = homogeneous_state(mats.dermis, mats.tsf).lambda3
@@ -84,14 +84,15 @@ def rel_l2(a: np.ndarray, b: np.ndarray) -> float:
 
 @pytest.fixture(scope="module")
 def box_model():
-    from woundsweep.stages import WoundModel
+    from woundsweep.model.stages import WoundModel
 
     return WoundModel(box_patch())
 
 
 @pytest.fixture(scope="module")
 def cylinder_mesh():
-    from woundsweep.geometry import GeometrySpec, build_mesh
+    from woundsweep.mesh.build import build_mesh
+    from woundsweep.mesh.spec import GeometrySpec
 
     # t_d = 1, subcutis factor 1, patch factor 2 (L = 4), width factor 0.3, aspect 0, m = 0.3
     return build_mesh(GeometrySpec.cylindrical(1.0, 1.0, 4.0, 1.2, 0.0, 0.3))
@@ -101,7 +102,7 @@ def cylinder_mesh():
 @pytest.mark.parametrize("angle", [0.0, 90.0])
 def test_unwounded_stage2_reproduces_stage1(box_model, skin: str, angle: float) -> None:
     """Lateral traction of healthy skin (stage 2) gives the Dirichlet pre-tension (stage 1)."""
-    from woundsweep.stages import JobMaterials
+    from woundsweep.model.materials import JobMaterials
 
     m = box_model
     m.set_materials(JobMaterials.table2(skin, angle))
@@ -112,7 +113,7 @@ def test_unwounded_stage2_reproduces_stage1(box_model, skin: str, angle: float) 
     u2 = m.displacement_input()
     assert rel_l2(u2, u1) < 0.01
     # Both are the analytic per-layer homogeneous state (P1 represents it exactly).
-    hom = homogeneous_field(m.points, skin, angle)
+    hom = homogeneous_field(m.domain.points, skin, angle)
     assert rel_l2(u1, hom) < 1e-6 and rel_l2(u2, hom) < 1e-6
     # The gauge points carry no load.
     assert out2.diagnostics["pin_reaction_max_mN"] < 1e-8 * out2.diagnostics["lateral_force_mN"]
@@ -123,7 +124,7 @@ def test_unwounded_oblique_orientation(box_model, skin: str) -> None:
     """At 45 degrees the healthy-skin traction has shear (P_xy != 0). Stage 2 applies it and
     gives the homogeneous state; stage 1's lateral faces are shear-free while its deep face is
     held, so the patch cannot take that state: the two stages differ by a few percent."""
-    from woundsweep.stages import JobMaterials
+    from woundsweep.model.materials import JobMaterials
 
     m = box_model
     m.set_materials(JobMaterials.table2(skin, 45.0))
@@ -131,7 +132,7 @@ def test_unwounded_oblique_orientation(box_model, skin: str) -> None:
     u1 = m.displacement_input()
     m.run_stage(2)
     u2 = m.displacement_input()
-    hom = homogeneous_field(m.points, skin, 45.0)
+    hom = homogeneous_field(m.domain.points, skin, 45.0)
     assert rel_l2(u2, hom) < 1e-6
     diff = rel_l2(u2, u1)
     print(f"\n{skin} 45 deg: stage 2 vs stage 1 relative L2 difference {diff:.3%}")
@@ -143,11 +144,11 @@ def test_lateral_facets_split_by_layer(box_model) -> None:
     import ufl
 
     from woundsweep import compat
-    from woundsweep.stages import LATERAL_DERMIS, LATERAL_SUBCUTIS
+    from woundsweep.model.domain import LATERAL_DERMIS, LATERAL_SUBCUTIS
 
     m = box_model
-    ds = ufl.Measure("ds", domain=m.mesh, subdomain_data=m.solver_facet_mt)
-    one = dolfinx_constant(m.mesh, 1.0)
+    ds = ufl.Measure("ds", domain=m.domain.mesh, subdomain_data=m.domain.solver_facet_mt)
+    one = dolfinx_constant(m.domain.mesh, 1.0)
     perimeter = 8 * HALF
     for tag, thickness in ((LATERAL_DERMIS, T_D), (LATERAL_SUBCUTIS, T_TOTAL - T_D)):
         form = compat.compile_form(one * ds(tag, metadata={"quadrature_degree": 1}))
@@ -171,7 +172,8 @@ def assemble_scalar(form) -> float:
 def test_rotating_the_orientation_by_90_degrees_rotates_the_solution(angle: float) -> None:
     """Patch P at orientation t and the same patch turned by +90 degrees at t + 90 are the same
     physical problem: equal von Mises per cell, and stage-1 displacements rotated by 90."""
-    from woundsweep.stages import JobMaterials, WoundModel
+    from woundsweep.model.materials import JobMaterials
+    from woundsweep.model.stages import WoundModel
 
     a = WoundModel(box_patch(rotate=False))
     b = WoundModel(box_patch(rotate=True))
@@ -181,8 +183,8 @@ def test_rotating_the_orientation_by_90_degrees_rotates_the_solution(angle: floa
     for stage in (1, 2):
         assert a.run_stage(stage).solve.status == "converged"
         assert b.run_stage(stage).solve.status == "converged"
-        vm_a = a.von_mises_cells()[np.argsort(a.cell_input)]
-        vm_b = b.von_mises_cells()[np.argsort(b.cell_input)]
+        vm_a = a.forms.von_mises_cells()[np.argsort(a.domain.cell_input)]
+        vm_b = b.forms.von_mises_cells()[np.argsort(b.domain.cell_input)]
         np.testing.assert_allclose(vm_b, vm_a, rtol=1e-7, atol=1e-9 * vm_a.max())
         if stage == 1:
             vm_stage1 = vm_a
@@ -194,21 +196,22 @@ def test_rotating_the_orientation_by_90_degrees_rotates_the_solution(angle: floa
         c = WoundModel(box_patch(rotate=False))
         c.set_materials(JobMaterials.table2("stiff", 135.0))
         c.run_stage(1)
-        vm_c = c.von_mises_cells()[np.argsort(c.cell_input)]
+        vm_c = c.forms.von_mises_cells()[np.argsort(c.domain.cell_input)]
         assert np.max(np.abs(vm_c - vm_stage1)) > 0.01 * vm_stage1.max()
 
 
 def test_stage2_closes_the_wound_and_stage3_reports_the_gap(cylinder_mesh) -> None:
-    from woundsweep.stages import JobMaterials, WoundModel
+    from woundsweep.model.materials import JobMaterials
+    from woundsweep.model.stages import WoundModel
 
     m = WoundModel(cylinder_mesh)
     w = 1.2
-    assert m.x_c == pytest.approx(w / 2)
-    assert len(m.zone_left_nodes) > 3 and len(m.zone_right_nodes) > 3
+    assert m.domain.x_c == pytest.approx(w / 2)
+    assert len(m.domain.zone_left_nodes) > 3 and len(m.domain.zone_right_nodes) > 3
     # The zone is the middle third of the length and the upper half of the depth.
-    zone_X = m.X[m.zone_nodes]
+    zone_X = m.domain.X[m.domain.zone_nodes]
     assert np.all(np.abs(zone_X[:, 1]) <= 4.0 / 3.0 + 1e-9)
-    assert np.all(zone_X[:, 2] >= -0.5 * m.wound_depth - 1e-9)
+    assert np.all(zone_X[:, 2] >= -0.5 * m.domain.wound_depth - 1e-9)
     m.set_materials(JobMaterials.table2("normal", 0.0))
 
     s1 = m.run_stage(1)
@@ -218,14 +221,14 @@ def test_stage2_closes_the_wound_and_stage3_reports_the_gap(cylinder_mesh) -> No
 
     s2 = m.run_stage(2)
     assert s2.solve.status == "converged"
-    x = m.X[:, 0] + m.u.x.array.reshape(-1, 3)[:, 0]
-    assert np.max(np.abs(x[m.zone_nodes] - w / 2)) < 1e-8
+    x = m.domain.X[:, 0] + m.u.reshape(-1, 3)[:, 0]
+    assert np.max(np.abs(x[m.domain.zone_nodes] - w / 2)) < 1e-8
     assert abs(s2.diagnostics["closure_gap_mm"]) < 1e-8
     # Wound-surface nodes outside the zone stay open.
     wound_nodes = np.unique(
-        m.input_node[np.unique(cylinder_mesh.facets[cylinder_mesh.facet_tags == 17])]
+        m.domain.input_node[np.unique(cylinder_mesh.facets[cylinder_mesh.facet_tags == 17])]
     )
-    outside = np.setdiff1d(wound_nodes, m.zone_nodes)
+    outside = np.setdiff1d(wound_nodes, m.domain.zone_nodes)
     assert np.max(np.abs(x[outside] - w / 2)) > 0.1 * w
     f_left, f_right = (
         s2.diagnostics["closure_force_left_mN"],
@@ -247,8 +250,9 @@ def test_stage2_closes_the_wound_and_stage3_reports_the_gap(cylinder_mesh) -> No
 
 
 def test_stiff_skin_has_higher_maximal_stress_than_soft(cylinder_mesh) -> None:
-    from woundsweep.solve import run_stages
-    from woundsweep.stages import JobMaterials, WoundModel
+    from woundsweep.model.job import run_stages
+    from woundsweep.model.materials import JobMaterials
+    from woundsweep.model.stages import WoundModel
 
     m = WoundModel(cylinder_mesh)
     p99 = {}
@@ -261,14 +265,16 @@ def test_stiff_skin_has_higher_maximal_stress_than_soft(cylinder_mesh) -> None:
 
 
 def test_unconverged_stage_stops_later_stages(box_model) -> None:
-    from woundsweep.newton import NewtonSettings, NewtonSolver
-    from woundsweep.solve import run_stages
-    from woundsweep.stages import JobMaterials
+    from woundsweep.model.job import run_stages
+    from woundsweep.model.materials import JobMaterials
+    from woundsweep.solver import NewtonSettings, NewtonSolver
 
     m = box_model
     saved = m.newton
     try:
-        m.newton = NewtonSolver(m, m.A, NewtonSettings(max_iterations=1, max_load_cuts=1))
+        m.newton = NewtonSolver(
+            m.problem, m.problem.A, NewtonSettings(max_iterations=1, max_load_cuts=1)
+        )
         recs = run_stages(m, JobMaterials.table2("soft", 0.0), 3)
     finally:
         m.newton = saved
@@ -277,26 +283,28 @@ def test_unconverged_stage_stops_later_stages(box_model) -> None:
 
 
 def test_newton_statuses_inverted_and_linear_solver_failed(box_model) -> None:
-    from woundsweep.newton import NewtonSettings, NewtonSolver
-    from woundsweep.stages import JobMaterials
+    from woundsweep.model.materials import JobMaterials
+    from woundsweep.solver import NewtonSettings, NewtonSolver
 
     m = box_model
     m.set_materials(JobMaterials.table2("normal", 0.0))
     # Push one top node 10 patch thicknesses down in a single step: every relaxation down to
     # gamma_min still inverts its cells.
-    newton = NewtonSolver(m, m.A, NewtonSettings(gamma_min=0.2, max_strain_step=1e9))
-    top = int(np.argmax(m.X[:, 2] - np.abs(m.X[:, 0]) - np.abs(m.X[:, 1])))
+    newton = NewtonSolver(
+        m.problem, m.problem.A, NewtonSettings(gamma_min=0.2, max_strain_step=1e9)
+    )
+    top = int(np.argmax(m.domain.X[:, 2] - np.abs(m.domain.X[:, 0]) - np.abs(m.domain.X[:, 1])))
     rows = np.array(
-        [*(3 * m.bottom_nodes + 0), *(3 * m.bottom_nodes + 1), *(3 * m.bottom_nodes + 2),
+        [*(3 * m.domain.bottom_nodes + 0), *(3 * m.domain.bottom_nodes + 1), *(3 * m.domain.bottom_nodes + 2),
          3 * top + 2], dtype=np.int32)  # fmt: skip
     values = np.zeros(len(rows))
     values[-1] = -10 * T_TOTAL
     res = newton.solve(rows, values)
     assert res.status == "inverted"
-    np.testing.assert_array_equal(m.u.x.array, 0.0)  # the last accepted state is kept
+    np.testing.assert_array_equal(m.u, 0.0)  # the last accepted state is kept
     # No Dirichlet condition at all: the tangent is singular (rigid motions).
-    newton = NewtonSolver(m, m.A, NewtonSettings())
-    offset = np.zeros(len(m.u.x.array))
+    newton = NewtonSolver(m.problem, m.problem.A, NewtonSettings())
+    offset = np.zeros(len(m.u))
     offset[2] = 1.0  # a load, so that a step is needed
     res = newton.solve(np.zeros(0, dtype=np.int32), np.zeros(0), offset)
     assert res.status == "linear-solver-failed"
@@ -305,14 +313,14 @@ def test_newton_statuses_inverted_and_linear_solver_failed(box_model) -> None:
 def test_stage_iteration_budget_ends_a_long_continuation(box_model) -> None:
     """A stage that needs more Newton steps than ``max_stage_iterations`` in all its load
     increments stops as ``max-iterations`` before the end of its load."""
-    from woundsweep.newton import NewtonSettings, NewtonSolver
-    from woundsweep.stages import JobMaterials
+    from woundsweep.model.materials import JobMaterials
+    from woundsweep.solver import NewtonSettings, NewtonSolver
 
     m = box_model
     saved = m.newton
     try:
         st = NewtonSettings(load_steps=4, max_stage_iterations=2)
-        m.newton = NewtonSolver(m, m.A, st)
+        m.newton = NewtonSolver(m.problem, m.problem.A, st)
         m.set_materials(JobMaterials.table2("soft", 0.0))
         out = m.run_stage(1)
     finally:

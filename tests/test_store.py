@@ -18,20 +18,17 @@ from typing import Any
 import h5py
 import numpy as np
 import pandas as pd
+import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 
 from woundsweep.errors import StoreError
-from woundsweep.grid import load_run
-from woundsweep.shards import estimate_cost
-from woundsweep.store import (
-    FAILURE_CLASSES,
-    JobOutcome,
-    Store,
-    read_results,
-    read_solver_output,
-    summarize,
-)
+from woundsweep.schema import FailureClass, StageResult
+from woundsweep.solverfile import read_solver_file
+from woundsweep.sweep.grid import load_run
+from woundsweep.sweep.results import STAGE_FIELDS
+from woundsweep.sweep.shards import estimate_cost
+from woundsweep.sweep.store import JobOutcome, Store, read_results, summarize
 
 ROOT = Path(__file__).resolve().parent.parent
 WS = [sys.executable, "-m", "woundsweep"]
@@ -121,7 +118,7 @@ def _store_converged(
     job = _manifest(rd).iloc[i]
     src = rd / f"solver-{i}{tag}.h5"
     _solver_file(src, job, range(stages[0], stages[1] + 1), **kw)
-    out = read_solver_output(src, job["job_id"], stages)
+    out = read_solver_file(src, job["job_id"], stages)
     return Store(rd).write_job(job.to_dict(), _outcome("converged", out), stages, fields, "0/1")
 
 
@@ -175,7 +172,7 @@ def test_not_converged_job(run_dir: Path) -> None:
     job = _manifest(run_dir).iloc[3]
     src = run_dir / "s.h5"
     _solver_file(src, job, range(1, 7), fail_at=3)
-    out = read_solver_output(src, job["job_id"], (1, 6))
+    out = read_solver_file(src, job["job_id"], (1, 6))
     Store(run_dir).write_job(job.to_dict(), _outcome("not-converged", out), (1, 6), "final", "0/1")
     df = pd.read_parquet(run_dir / "results")
     assert df["status"].tolist() == ["converged"] * 2 + ["diverged"] + ["not-run"] * 3
@@ -211,14 +208,14 @@ def test_solver_output_validation(run_dir: Path) -> None:
     src = run_dir / "s.h5"
     _solver_file(src, m.iloc[0], range(1, 4))
     with pytest.raises(StoreError, match="is not"):
-        read_solver_output(src, m["job_id"].iloc[1], (1, 3))
+        read_solver_file(src, m["job_id"].iloc[1], (1, 3))
     with h5py.File(src, "a") as f:
         f.attrs["stage_results"] = "not json"
     with pytest.raises(StoreError, match="stage_results"):
-        read_solver_output(src, m["job_id"].iloc[0], (1, 3))
+        read_solver_file(src, m["job_id"].iloc[0], (1, 3))
     src.write_bytes(b"\x89HDF junk")
     with pytest.raises(StoreError, match="unreadable"):
-        read_solver_output(src, m["job_id"].iloc[0], (1, 3))
+        read_solver_file(src, m["job_id"].iloc[0], (1, 3))
 
 
 def test_job_state_and_quarantine(run_dir: Path) -> None:
@@ -342,14 +339,14 @@ def test_summarize_counts_and_estimates(run_dir: Path) -> None:
         elif cls == "not-converged":
             src = run_dir / "s.h5"
             _solver_file(src, job, range(1, 7), fail_at=2)
-            out = read_solver_output(src, job["job_id"], (1, 6))
+            out = read_solver_file(src, job["job_id"], (1, 6))
             store.write_job(job.to_dict(), _outcome(cls, out), (1, 6), "final", "0/1")
         else:
             store.write_job(job.to_dict(), _outcome(cls, attempts=2), (1, 6), "final", "0/1")
     s = summarize(m, read_results(run_dir))
     assert s["jobs_total"] == 32 and s["jobs_done"] == 6 and s["jobs_pending"] == 26
     assert s["rows"] == 36
-    expected = {c: sum(v == c for v in want.values()) for c in FAILURE_CLASSES}
+    expected = {c: sum(v == c for v in want.values()) for c in FailureClass}
     assert s["by_failure_class"] == expected
     assert s["not_converged_at_stage"] == {"2": 1}
     # Stage 1: jobs 0, 1, 3 converged; stage 2: job 3 diverged; failed jobs are all not-run.
@@ -387,3 +384,11 @@ def test_results_readable_while_empty(run_dir: Path) -> None:
     assert len(df) == 0 and "failure_class" in df.columns
     s = summarize(_manifest(run_dir), df)
     assert s["jobs_done"] == 0 and s["cpu_time_left_estimate_s"] is None
+
+
+def test_stage_field_types_pinned() -> None:
+    """The StageResult columns: in its field order, counts as int64, the rest float64."""
+    assert list(STAGE_FIELDS) == list(StageResult._fields[2:])
+    ints = {k for k, t in STAGE_FIELDS.items() if t == pa.int64()}
+    assert ints == {"newton_iterations", "n_penetrating", "dofs", "cells"}
+    assert all(t == pa.float64() for k, t in STAGE_FIELDS.items() if k not in ints)

@@ -5,7 +5,7 @@ version strings. Everything else in woundsweep calls these helpers. Serial only:
 one process (the sweep is parallel over jobs, not within a job).
 
 Mesh numbering: `mesh_from_arrays` builds a DOLFINx mesh from the numpy `MeshData` arrays of
-`woundsweep.geometry`; DOLFINx reorders cells and nodes, so the helpers here translate between
+`woundsweep.mesh`; DOLFINx reorders cells and nodes, so the helpers here translate between
 its numbering and the input ("original") numbering of points and cells.
 """
 

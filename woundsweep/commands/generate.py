@@ -10,8 +10,8 @@ import yaml
 
 from ..errors import StoreError, SweepError
 from ..fsutil import atomic_write, atomic_write_bytes
-from ..grid import expand, load_sweep, parse_sweep
 from ..provenance import provenance
+from ..sweep.grid import expand, load_sweep, parse_sweep
 
 __all__ = ["cmd", "generate"]
 

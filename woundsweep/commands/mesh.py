@@ -13,9 +13,10 @@ from tqdm import tqdm
 
 from ..errors import GeometryError
 from ..fsutil import atomic_write
-from ..geometry import GeometrySpec, MeshData
-from ..grid import load_run
-from ..meshcache import CachedMesh, get_mesh
+from ..mesh.build import MeshData
+from ..mesh.cache import CachedMesh, get_mesh
+from ..mesh.spec import GeometrySpec
+from ..sweep.grid import load_run
 
 __all__ = ["cmd", "mesh_geometry", "write_vtu"]
 

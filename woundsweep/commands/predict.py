@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from pathlib import Path
 
 import click
@@ -10,35 +11,37 @@ import click
 __all__ = ["cmd"]
 
 
+# The Table 1 parameters given as numbers: option, manifest column, required, help.
+_NUMERIC_PARAMS = (
+    ("--dermal-thickness", "dermal_thickness_mm", True, "Epidermis + dermis thickness t_d (mm)."),
+    ("--subcutis-thickness-factor", "subcutis_thickness_factor", True, "Subcutis thickness / t_d."),
+    ("--patch-size-factor", "patch_size_factor", True, "Patch half-length / total thickness."),
+    ("--wound-width-factor", "wound_width_factor", True, "Wound width / patch half-length."),
+    ("--wound-depth-factor", "wound_depth_factor", False, "Wedge only: depth / total thickness."),
+    (
+        "--wound-aspect-factor",
+        "wound_aspect_factor",
+        False,
+        "Cylindrical only: axis offset / width.",
+    ),
+    ("--mesh-size-factor", "mesh_size_factor", True, "Mesh size factor (larger = finer)."),
+    ("--orientation", "orientation_deg", True, "Wound axis vs stiff material axis (deg)."),
+)
+
+
+def _numeric_params(f: Callable[..., None]) -> Callable[..., None]:
+    """One float option per `_NUMERIC_PARAMS` entry, in that order, named by its column."""
+    for flag, column, required, text in reversed(_NUMERIC_PARAMS):
+        f = click.option(flag, column, type=float, required=required, default=None, help=text)(f)
+    return f
+
+
 @click.command("predict")
 @click.argument("model", type=click.Path(path_type=Path))
 @click.option(
     "--shape", required=True, type=click.Choice(["cylindrical", "wedge"]), help="Wound shape."
 )
-@click.option(
-    "--dermal-thickness", required=True, type=float, help="Epidermis + dermis thickness t_d (mm)."
-)
-@click.option(
-    "--subcutis-thickness-factor", required=True, type=float, help="Subcutis thickness / t_d."
-)
-@click.option(
-    "--patch-size-factor", required=True, type=float, help="Patch half-length / total thickness."
-)
-@click.option(
-    "--wound-width-factor", required=True, type=float, help="Wound width / patch half-length."
-)
-@click.option(
-    "--wound-depth-factor", type=float, default=None, help="Wedge only: depth / total thickness."
-)
-@click.option(
-    "--wound-aspect-factor", type=float, default=None, help="Cylindrical only: axis offset / width."
-)
-@click.option(
-    "--mesh-size-factor", required=True, type=float, help="Mesh size factor (larger = finer)."
-)
-@click.option(
-    "--orientation", required=True, type=float, help="Wound axis vs stiff material axis (deg)."
-)
+@_numeric_params
 @click.option("--skin-type", required=True, help="Skin type name, e.g. soft, normal, stiff.")
 @click.option(
     "--stage", "stages", type=click.IntRange(1, 6), multiple=True, help="Stage(s) [all trained]."
@@ -52,19 +55,12 @@ __all__ = ["cmd"]
 def cmd(
     model: Path,
     shape: str,
-    dermal_thickness: float,
-    subcutis_thickness_factor: float,
-    patch_size_factor: float,
-    wound_width_factor: float,
-    wound_depth_factor: float | None,
-    wound_aspect_factor: float | None,
-    mesh_size_factor: float,
-    orientation: float,
     skin_type: str,
     stages: tuple[int, ...],
     scheme: str | None,
     allow_extrapolation: bool,
     as_json: bool,
+    **numeric: float | None,
 ) -> None:
     """Predict the maximal-stress quantile of one wound with a model from `woundsweep analyze`.
 
@@ -77,14 +73,7 @@ def cmd(
     loaded = load_model(model, scheme)
     params = {
         "wound_shape": shape,
-        "dermal_thickness_mm": dermal_thickness,
-        "subcutis_thickness_factor": subcutis_thickness_factor,
-        "patch_size_factor": patch_size_factor,
-        "wound_width_factor": wound_width_factor,
-        "wound_depth_factor": wound_depth_factor,
-        "wound_aspect_factor": wound_aspect_factor,
-        "mesh_size_factor": mesh_size_factor,
-        "orientation_deg": orientation,
+        **{column: numeric[column] for _, column, _, _ in _NUMERIC_PARAMS},
         "skin_type": skin_type,
     }
     preds = predict(loaded, params, list(stages) or None, allow_extrapolation)

@@ -8,17 +8,12 @@ from pathlib import Path
 import click
 
 from ..errors import StoreError
-from ..grid import parse_stage_range
-from ..runner import RunOptions, RunSummary, run_shard
-from ..shards import parse_shard
-from ..store import FAILURE_CLASSES, FIELDS_CHOICES
+from ..schema import FailureClass, parse_stage_range
+from ..sweep.runner import RunOptions, RunSummary, run_shard
+from ..sweep.shards import parse_shard
+from ..sweep.store import FIELDS_CHOICES
 
-__all__ = ["cmd", "parse_stages"]
-
-
-def parse_stages(text: str) -> tuple[int, int]:
-    """``"A-B"`` or ``"A"`` with 1 <= A <= B <= 6."""
-    return parse_stage_range(text, StoreError)
+__all__ = ["cmd"]
 
 
 def _default_workers() -> int:
@@ -40,7 +35,7 @@ def _memory_bytes() -> int:
 
 
 def _summary_line(s: RunSummary, run_dir: Path) -> str:
-    classes = ", ".join(f"{s.by_class[c]} {c}" for c in FAILURE_CLASSES if s.by_class.get(c))
+    classes = ", ".join(f"{s.by_class[c]} {c}" for c in FailureClass if s.by_class.get(c))
     return (
         f"{s.jobs} jobs in shard: {s.skipped} already done, {s.ran} run"
         f"{' (' + classes + ')' if classes else ''}, {s.attempts} attempts, "
@@ -146,7 +141,7 @@ def cmd(
         max_memory_bytes=cap,
         retries=retries,
         rerun_failed=rerun_failed,
-        stages=parse_stages(stages_text),
+        stages=parse_stage_range(stages_text, StoreError),
         fields=fields,
         warmup=warmup,
         jit_stale_after_s=jit_stale_after_s,

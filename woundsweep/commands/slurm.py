@@ -9,8 +9,8 @@ from pathlib import Path
 
 import click
 
-from ..grid import load_run
-from ..slurm import (
+from ..sweep.grid import load_run
+from ..sweep.slurm import (
     SlurmError,
     SlurmOptions,
     SubmitError,

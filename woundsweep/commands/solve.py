@@ -12,6 +12,9 @@ from pathlib import Path
 
 import click
 
+from ..errors import SolverError
+from ..schema import ExitCode, StageResult, StageStatus, parse_stage_range
+
 __all__ = ["cmd"]
 
 _HEADER = (
@@ -24,8 +27,7 @@ def _fmt(value: float | None, spec: str) -> str:
     return "-" if value is None else format(value, spec)
 
 
-def _row(rec: object) -> str:
-    r = rec.result  # type: ignore[attr-defined]
+def _row(r: StageResult) -> str:
     return (
         f"{r.stage:>5} {r.status:<21}{_fmt(r.newton_iterations, 'd'):>7}"
         f"{_fmt(r.time_s, '.2f'):>8}{_fmt(r.p99_von_mises_kPa, '.3f'):>12}"
@@ -55,23 +57,23 @@ def cmd(run_dir: Path, job_index: int, stages_text: str, out: Path | None) -> No
     # Each job is one serial process; threaded BLAS would only fight the sibling workers.
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
     os.environ.setdefault("OMP_NUM_THREADS", "1")
-    from ..solve import EXIT_OK, NotConvergedError, parse_stage_range, solve_job
+    from ..model.job import NotConvergedError, StageRecord, solve_job
 
-    stages = parse_stage_range(stages_text)
+    stages = parse_stage_range(stages_text, SolverError)
     logging.getLogger().setLevel(logging.WARNING)  # FFCx/cffi log every compile at INFO
 
     click.echo(f"job {job_index}: stages {stages[0]}-{stages[1]}")
     click.echo(_HEADER)
 
-    def echo(rec: object) -> None:
-        if rec.result.stage >= stages[0]:  # type: ignore[attr-defined]
-            click.echo(_row(rec))
+    def echo(rec: StageRecord) -> None:
+        if rec.result.stage >= stages[0]:
+            click.echo(_row(rec.result))
 
     outcome = solve_job(run_dir, job_index, stages, out, echo=echo)
     for rec in outcome.records:
-        if rec.result.status == "not-run":
-            click.echo(_row(rec))
+        if rec.result.status == StageStatus.NOT_RUN:
+            click.echo(_row(rec.result))
     click.echo(f"wrote {outcome.out}")
-    if outcome.exit_code != EXIT_OK:
-        bad = next(r.result for r in outcome.records if r.result.status != "converged")
+    if outcome.exit_code != ExitCode.OK:
+        bad = next(r.result for r in outcome.records if r.result.status != StageStatus.CONVERGED)
         raise NotConvergedError(f"job {job_index}: stage {bad.stage} {bad.status}")

@@ -8,8 +8,8 @@ from typing import Any
 
 import click
 
-from ..grid import load_run
-from ..store import read_results, summarize
+from ..sweep.grid import load_run
+from ..sweep.results import read_results, summarize
 
 __all__ = ["cmd", "format_status"]
 
@@ -25,7 +25,7 @@ def _duration(seconds: float | None) -> str:
 
 
 def format_status(s: dict[str, Any]) -> str:
-    """The human-readable table of a ``store.summarize`` record."""
+    """The human-readable table of a `summarize` record."""
     lines = [
         f"jobs: {s['jobs_done']} of {s['jobs_total']} stored, {s['jobs_pending']} pending"
         f" ({s['rows']} rows, {s['attempts']} attempts)"

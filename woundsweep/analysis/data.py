@@ -1,0 +1,128 @@
+"""The analysis's rows: the run's result store, read through the store's validated reader.
+
+Rows are the converged (job, stage) results with a finite, positive `STRESS`; the model
+matrix encodes the wound shape by `SHAPE_CODES` and the skin type by its Fung ``c`` (kPa).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from ..errors import AnalysisError
+from ..schema import StageStatus
+from ..sweep.store import read_results
+from .settings import FEATURES, REQUIRED_COLUMNS, SHAPE_CODES, STRESS
+
+__all__ = [
+    "drop_orphans",
+    "encode_features",
+    "load_results",
+    "require_columns",
+    "select_rows",
+    "skin_codes",
+    "sweep_settings",
+]
+
+
+def sweep_settings(run_dir: Path) -> tuple[dict[str, Any], dict[str, float]]:
+    """``Sweep.analysis`` and skin type -> Fung c (kPa) of the run, or the paper's defaults."""
+    from ..sweep.grid import DEFAULTS, load_run
+
+    if (run_dir / "sweep.yaml").is_file() and (run_dir / "manifest.parquet").is_file():
+        sweep = load_run(run_dir).sweep
+        analysis, materials = dict(sweep.analysis), sweep.materials
+    else:
+        analysis, materials = {}, DEFAULTS["materials"]
+    return analysis, {name: float(p["c_kPa"]) for name, p in materials["skin_types"].items()}
+
+
+def skin_codes(run_dir: str | Path) -> dict[str, float]:
+    """Skin type name -> its Fung ``c`` in kPa: an ordered, physical code for the model."""
+    return sweep_settings(Path(run_dir))[1]
+
+
+def require_columns(df: pd.DataFrame, where: object) -> pd.DataFrame:
+    """``df`` if it holds every `REQUIRED_COLUMNS` entry; else `AnalysisError` naming them."""
+    missing = [c for c in REQUIRED_COLUMNS if c not in df.columns]
+    if missing:
+        raise AnalysisError(f"{where}: missing columns {missing}")
+    return df
+
+
+def load_results(run_dir: str | Path) -> pd.DataFrame:
+    """All rows of ``RUN_DIR/results`` (one per job and stage), validated by the store.
+
+    A damaged result file raises the store's `StoreError` naming it and the fix.
+    """
+    rd = Path(run_dir)
+    res = rd / "results"
+    if not res.is_dir():
+        raise AnalysisError(f"{res}: no result store (run `woundsweep run {run_dir}` first)")
+    df = read_results(rd)
+    if df.empty:
+        raise AnalysisError(f"{res}: the result store holds no result files (job-*.parquet)")
+    return require_columns(df, res)
+
+
+def drop_orphans(results: pd.DataFrame, run_dir: Path) -> tuple[pd.DataFrame, int]:
+    """The rows of jobs in the run's manifest, and how many rows were not.
+
+    Rows of jobs that a regenerated manifest no longer holds belong to another sweep.
+    """
+    if not (run_dir / "manifest.parquet").is_file():
+        return results, 0
+    in_manifest = results["job_id"].isin(
+        set(pd.read_parquet(run_dir / "manifest.parquet", columns=["job_id"])["job_id"])
+    )
+    return results[in_manifest], int((~in_manifest).sum())
+
+
+def select_rows(df: pd.DataFrame) -> tuple[pd.DataFrame, dict[str, Any]]:
+    """Converged rows with a finite, positive maximal stress; and the row counts."""
+    converged = df["status"].astype(str) == StageStatus.CONVERGED.value
+    stress = pd.to_numeric(df[STRESS], errors="coerce")
+    positive = converged & np.isfinite(stress) & (stress > 0)
+    rows = df[positive].reset_index(drop=True)
+    counts = {
+        "store_rows": int(len(df)),
+        "jobs": int(df["job_id"].nunique()),
+        "converged_rows": int(converged.sum()),
+        "used_rows": int(len(rows)),
+        "status": {
+            str(k): int(v) for k, v in df["status"].astype(str).value_counts().sort_index().items()
+        },
+        "used_rows_by_stage": {
+            str(int(k)): int(v) for k, v in rows["stage"].value_counts().sort_index().items()
+        },
+    }
+    if not converged.any():
+        raise AnalysisError(
+            f"no converged rows in the result store ({len(df)} rows: {counts['status']})"
+        )
+    if rows.empty:
+        raise AnalysisError("no converged row has a positive, finite maximal stress")
+    dup = rows.duplicated(["job_id", "stage"])
+    if dup.any():
+        raise AnalysisError(f"the result store has {int(dup.sum())} duplicate (job_id, stage) rows")
+    return rows, counts
+
+
+def encode_features(rows: pd.DataFrame, skins: Mapping[str, float]) -> np.ndarray:
+    """The model matrix (rows x `FEATURES`), float64, NaN for factors that do not apply."""
+    X = np.empty((len(rows), len(FEATURES)), dtype=np.float64)
+    for j, name in enumerate(FEATURES):
+        col = rows[name]
+        if name in ("wound_shape", "skin_type"):
+            codes = SHAPE_CODES if name == "wound_shape" else skins
+            unknown = sorted(set(col.astype(str)) - set(codes))
+            if unknown:
+                raise AnalysisError(f"{name}: unknown values {unknown} (known: {sorted(codes)})")
+            X[:, j] = col.astype(str).map(codes).to_numpy(dtype=np.float64)
+        else:
+            X[:, j] = pd.to_numeric(col, errors="coerce").to_numpy(dtype=np.float64)
+    return X

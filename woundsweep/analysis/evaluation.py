@@ -1,0 +1,70 @@
+"""Scores of a trained model on one set of rows, and its feature importances."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from .settings import FEATURES, IMPORTANCE_GROUPS
+
+__all__ = ["evaluate", "feature_importance"]
+
+
+def evaluate(y: np.ndarray, prob: np.ndarray) -> dict[str, Any]:
+    """Accuracy, log loss, one-vs-rest AUC per quantile, micro and macro AUC, confusion matrix.
+
+    A quantile without both positives and negatives in ``y`` has no AUC (``None``); the macro
+    AUC is the mean over the quantiles that have one (sklearn's ``average="macro"``).
+    """
+    from sklearn.metrics import confusion_matrix, log_loss, roc_auc_score
+
+    q = prob.shape[1]
+    y = np.asarray(y, dtype=np.int64)
+    pred = prob.argmax(axis=1)
+    onehot = np.eye(q, dtype=np.int64)[y]
+    per_class: list[float | None] = []
+    for k in range(q):
+        npos = int(onehot[:, k].sum())
+        per_class.append(
+            float(roc_auc_score(onehot[:, k], prob[:, k])) if 0 < npos < len(y) else None
+        )
+    defined = [a for a in per_class if a is not None]
+    return {
+        "rows": int(len(y)),
+        "accuracy": float(np.mean(pred == y)),
+        "within_one_quantile": float(np.mean(np.abs(pred - y) <= 1)),
+        "log_loss": float(log_loss(y, prob, labels=list(range(q)))),
+        "auc_per_quantile": per_class,
+        "auc_macro": float(np.mean(defined)) if defined else None,
+        "auc_micro": float(roc_auc_score(onehot.ravel(), prob.ravel()))
+        if len(set(y)) > 1
+        else None,
+        "class_counts": np.bincount(y, minlength=q).tolist(),
+        "confusion_matrix": confusion_matrix(y, pred, labels=list(range(q))).tolist(),
+    }
+
+
+def feature_importance(booster: Any) -> dict[str, Any]:
+    """Split counts ("weight", Figure 3C) and gains per feature and per `IMPORTANCE_GROUPS` entry."""
+    weight = booster.get_score(importance_type="weight")
+    total = booster.get_score(importance_type="total_gain")
+
+    def entry(names: Sequence[str]) -> dict[str, float]:
+        w = float(sum(weight.get(n, 0.0) for n in names))
+        t = float(sum(total.get(n, 0.0) for n in names))
+        return {"weight": w, "gain": t / w if w else 0.0, "total_gain": t}
+
+    features = {f: entry([f]) for f in FEATURES}
+    grouped = {g: entry(m) for g, m in IMPORTANCE_GROUPS.items()}
+
+    def rank(key: str) -> list[str]:
+        return sorted(grouped, key=lambda g: (-grouped[g][key], g))
+
+    return {
+        "features": features,
+        "grouped": grouped,
+        "ranking_weight": rank("weight"),
+        "ranking_total_gain": rank("total_gain"),
+    }

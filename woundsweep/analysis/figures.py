@@ -1,0 +1,255 @@
+"""Figures of ``woundsweep analyze`` (matplotlib, Agg backend), each written as PNG and SVG.
+
+Figure objects are built directly (no pyplot), so nothing depends on a display or on global
+figure state. Stresses in kPa; locations are normalised as `paper.normalised_locations`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import matplotlib
+
+matplotlib.use("Agg")
+
+import numpy as np  # noqa: E402
+import pandas as pd  # noqa: E402
+from matplotlib.figure import Figure  # noqa: E402
+
+from .settings import STAGE_GROUPS  # noqa: E402
+
+if TYPE_CHECKING:
+    from .fitting import SchemeFit
+
+__all__ = [
+    "FIGURE_STEMS",
+    "confusion",
+    "importance_bars",
+    "max_locations",
+    "roc_curves",
+    "save",
+    "stiff_vs_soft",
+    "stress_distribution",
+    "training_curves",
+    "write_all",
+]
+
+# Per-scheme figures carry a ``_<scheme>`` suffix.
+FIGURE_STEMS = {
+    "per_scheme": ("training", "importance", "roc", "confusion"),
+    "shared": ("stress_distribution", "stiff_vs_soft", "max_location"),
+}
+
+
+def save(fig: Figure, out_dir: Path, stem: str) -> list[Path]:
+    """Write ``stem.png`` and ``stem.svg``; return both paths."""
+    paths = [out_dir / f"{stem}.png", out_dir / f"{stem}.svg"]
+    # No timestamps in the files: identical inputs give identical figures.
+    fig.savefig(paths[0], dpi=120, metadata={"Software": None})
+    fig.savefig(paths[1], metadata={"Date": None})
+    return paths
+
+
+def training_curves(eval_log: dict[str, dict[str, list[float]]], best: int, title: str) -> Figure:
+    """Figure 3A/B: classification error and log loss per boosting round."""
+    fig = Figure(figsize=(9, 3.6), layout="constrained")
+    for ax, metric, label in zip(
+        fig.subplots(1, 2), ("merror", "mlogloss"), ("classification error", "log loss")
+    ):
+        for split, style in (("train", "-"), ("validation", "--")):
+            vals = eval_log.get(split, {}).get(metric, [])
+            ax.plot(np.arange(1, len(vals) + 1), vals, style, label=split)
+        ax.axvline(best + 1, color="grey", lw=0.8, ls=":", label=f"best round {best + 1}")
+        ax.set_xlabel("boosting round")
+        ax.set_ylabel(label)
+        ax.legend(fontsize=8)
+    fig.suptitle(title)
+    return fig
+
+
+def importance_bars(importance: dict[str, Any], title: str) -> Figure:
+    """Figure 3C: split counts ("weight"), average gain and total gain per feature group."""
+    grouped = importance["grouped"]
+    names = importance["ranking_weight"][::-1]
+    fig = Figure(figsize=(11, 4), layout="constrained")
+    axes = fig.subplots(1, 3, sharey=True)
+    for ax, key, label in zip(
+        axes, ("weight", "gain", "total_gain"), ("splits (weight)", "average gain", "total gain")
+    ):
+        ax.barh(names, [grouped[n][key] for n in names], color="tab:blue")
+        ax.set_xlabel(label)
+    fig.suptitle(f"{title} (wound_depth = depth factor + aspect factor columns)")
+    return fig
+
+
+def roc_curves(y: np.ndarray, prob: np.ndarray, title: str) -> Figure:
+    """Figure 3D: one-vs-rest ROC per quantile, micro- and macro-average curves (test rows)."""
+    from sklearn.metrics import auc, roc_curve
+
+    q = prob.shape[1]
+    onehot = np.eye(q, dtype=int)[np.asarray(y, dtype=int)]
+    fig = Figure(figsize=(5.5, 5), layout="constrained")
+    ax = fig.subplots()
+    grid = np.linspace(0, 1, 201)
+    tprs, aucs = [], []
+    for k in range(q):
+        if 0 < onehot[:, k].sum() < len(y):
+            fpr, tpr, _ = roc_curve(onehot[:, k], prob[:, k])
+            aucs.append(auc(fpr, tpr))
+            tprs.append(np.interp(grid, fpr, tpr))
+            ax.plot(fpr, tpr, lw=0.8, alpha=0.7, label=f"Q{k + 1} (AUC {aucs[-1]:.3f})")
+    if len(set(np.asarray(y).tolist())) > 1:
+        fpr, tpr, _ = roc_curve(onehot.ravel(), prob.ravel())
+        ax.plot(fpr, tpr, "k-", lw=2, label=f"micro-average (AUC {auc(fpr, tpr):.3f})")
+    if tprs:
+        ax.plot(
+            grid,
+            np.mean(tprs, axis=0),
+            "k--",
+            lw=2,
+            label=f"macro-average (AUC {np.mean(aucs):.3f})",
+        )
+    ax.plot([0, 1], [0, 1], color="grey", lw=0.6, ls=":")
+    ax.set_xlabel("false positive rate")
+    ax.set_ylabel("true positive rate")
+    ax.legend(fontsize=7, loc="lower right")
+    ax.set_title(title)
+    return fig
+
+
+def confusion(matrix: Sequence[Sequence[int]], title: str) -> Figure:
+    """Test confusion matrix, each true quantile's row normalised to 1."""
+    m = np.asarray(matrix, dtype=float)
+    frac = m / np.maximum(m.sum(axis=1, keepdims=True), 1)
+    q = len(m)
+    fig = Figure(figsize=(5, 4.4), layout="constrained")
+    ax = fig.subplots()
+    im = ax.imshow(frac, vmin=0, vmax=1, cmap="viridis")
+    ticks = np.arange(q)
+    ax.set_xticks(ticks, [f"Q{k + 1}" for k in ticks])
+    ax.set_yticks(ticks, [f"Q{k + 1}" for k in ticks])
+    ax.set_xlabel("predicted quantile")
+    ax.set_ylabel("true quantile")
+    fig.colorbar(im, ax=ax, label="fraction of the true quantile")
+    ax.set_title(title)
+    return fig
+
+
+def stress_distribution(stress: np.ndarray, stage: np.ndarray, edges: np.ndarray | None) -> Figure:
+    """Histogram of the maximal stress (log scale) per stage group, with the quantile edges."""
+    s = np.asarray(stress, dtype=float)
+    bins = np.geomspace(s.min(), s.max(), 60) if s.max() > s.min() else 10
+    fig = Figure(figsize=(7, 4), layout="constrained")
+    ax = fig.subplots()
+    for name, stages in STAGE_GROUPS:
+        sel = np.isin(stage, stages)
+        if sel.any():
+            ax.hist(
+                s[sel], bins=bins, histtype="step", lw=1.5, label=f"{name} (n={int(sel.sum())})"
+            )
+    if edges is not None:
+        for e in edges[1:-1]:
+            ax.axvline(e, color="grey", lw=0.6, ls="--")
+    ax.set_xscale("log")
+    ax.set_xlabel("maximal stress: volume-weighted p99 von Mises (kPa)")
+    ax.set_ylabel("rows")
+    ax.legend(fontsize=8)
+    ax.set_title("Distribution of maximal stress (dashed: quantile edges)")
+    return fig
+
+
+def stiff_vs_soft(pairs: pd.DataFrame, summary: dict[str, Any]) -> Figure:
+    """Stiff against soft stress of paired jobs (same geometry, orientation, stage), per shape."""
+    shapes = sorted(summary) or ["(no pairs)"]
+    fig = Figure(figsize=(4.5 * len(shapes), 4.3), layout="constrained")
+    axes = np.atleast_1d(fig.subplots(1, len(shapes)))
+    for ax, shape in zip(axes, shapes):
+        p = pairs[pairs["wound_shape"].astype(str) == shape] if len(pairs) else pairs
+        if len(p):
+            ax.scatter(p["soft_kPa"], p["stiff_kPa"], s=4, alpha=0.4, rasterized=True)
+            lo = float(min(p["soft_kPa"].min(), p["stiff_kPa"].min()))
+            hi = float(max(p["soft_kPa"].max(), p["stiff_kPa"].max()))
+            ax.plot([lo, hi], [lo, hi], "k-", lw=0.8)
+            ax.set_xscale("log")
+            ax.set_yscale("log")
+        st = summary.get(shape)
+        if st:
+            pval = st["sign_test_p"]
+            ptxt = "n/a" if pval is None else f"{pval:.2g}"
+            ax.set_title(
+                f"{shape}: stiff > soft in {100 * st['fraction_stiff_greater']:.1f}%\n"
+                f"({st['stiff_greater']}/{st['pairs']} pairs, sign test p = {ptxt})",
+                fontsize=9,
+            )
+        ax.set_xlabel("soft skin: maximal stress (kPa)")
+        ax.set_ylabel("stiff skin: maximal stress (kPa)")
+    return fig
+
+
+def max_locations(locs: pd.DataFrame) -> Figure:
+    """Figure 2: where the maximum sits along (y), across (x) and through (z) the patch."""
+    cols = (
+        ("y_along", (0, 1), "along the wound: (y + L) / 2L"),
+        ("x_across", (-1, 1), "across: (x - w/2) / (L + w/2)"),
+        ("z_depth", (0, 1), "depth: -z / T (0 = surface)"),
+    )
+    fig = Figure(figsize=(10, 7.5), layout="constrained")
+    axes = fig.subplots(len(STAGE_GROUPS), 3, squeeze=False)
+    for i, (group, _) in enumerate(STAGE_GROUPS):
+        sel = locs[locs["stage_group"] == group]
+        for j, (col, rng, label) in enumerate(cols):
+            ax = axes[i, j]
+            # Clip so that a maximum found slightly outside the undeformed patch still counts.
+            vals = np.clip(sel[col].to_numpy(dtype=float), *rng)
+            ax.hist(vals, bins=40, range=rng, color="tab:red" if i == 1 else "tab:blue")
+            if col == "y_along":
+                for v in (1 / 3, 2 / 3):
+                    ax.axvline(v, color="grey", lw=0.8, ls="--")
+            if i == len(STAGE_GROUPS) - 1:
+                ax.set_xlabel(label)
+            if j == 0:
+                ax.set_ylabel(f"{group}\n(n={len(sel)})")
+    fig.suptitle("Location of the maximal von Mises stress (dashed: ends of the closure zone)")
+    return fig
+
+
+def write_all(
+    out_dir: Path,
+    fits: Sequence[SchemeFit],
+    stress: np.ndarray,
+    stage: np.ndarray,
+    pairs: pd.DataFrame,
+    stiff_soft: dict[str, Any],
+    locs: pd.DataFrame,
+) -> list[Path]:
+    """Write every figure of the analysis; return the paths (PNG and SVG)."""
+    paths: list[Path] = []
+    for f in fits:
+        label = f"{f.scheme} split"
+        test = f.metrics["test"]
+        y_test = f.y[f.split.test]
+        paths += save(
+            training_curves(f.trained.eval_log, f.trained.best_iteration, label),
+            out_dir,
+            f"training_{f.scheme}",
+        )
+        paths += save(
+            importance_bars(f.metrics["importance"], label), out_dir, f"importance_{f.scheme}"
+        )
+        paths += save(
+            roc_curves(y_test, f.prob_test, f"{label}: test rows (n={len(y_test)})"),
+            out_dir,
+            f"roc_{f.scheme}",
+        )
+        paths += save(
+            confusion(test["confusion_matrix"], f"{label}: test rows"),
+            out_dir,
+            f"confusion_{f.scheme}",
+        )
+    edges = fits[0].edges_kPa if fits else None
+    paths += save(stress_distribution(stress, stage, edges), out_dir, "stress_distribution")
+    paths += save(stiff_vs_soft(pairs, stiff_soft), out_dir, "stiff_vs_soft")
+    paths += save(max_locations(locs), out_dir, "max_location")
+    return paths

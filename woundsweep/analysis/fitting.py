@@ -1,0 +1,131 @@
+"""One split scheme end to end: split, bin on the training rows, train, evaluate.
+
+`SchemeFit` is what a scheme produced; the figures and the pipeline both read it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping
+from typing import Any, NamedTuple
+
+import numpy as np
+import pandas as pd
+
+from .. import __version__
+from ..errors import AnalysisError
+from .evaluation import evaluate, feature_importance
+from .settings import FEATURES, MODEL_FORMAT, SCHEMES, SHAPE_CODES, STRESS, ModelSettings
+from .splits import (
+    Split,
+    assign_quantiles,
+    geometry_groups,
+    geometry_split,
+    quantile_edges,
+    random_split,
+)
+from .training import Trained, predict_proba, train_model
+
+__all__ = ["SchemeFit", "feature_ranges", "fit_scheme"]
+
+
+class SchemeFit(NamedTuple):
+    """Everything one split scheme produced (metrics and what the figures need)."""
+
+    scheme: str
+    split: Split
+    edges_kPa: np.ndarray
+    y: np.ndarray
+    trained: Trained
+    prob_test: np.ndarray
+    metrics: dict[str, Any]
+    meta: dict[str, Any]
+
+
+def feature_ranges(X: np.ndarray) -> dict[str, dict[str, list[float]]]:
+    """Per wound shape, [min, max] of every numeric feature over the rows of ``X``."""
+    out: dict[str, dict[str, list[float]]] = {}
+    shape_col = FEATURES.index("wound_shape")
+    for shape, code in SHAPE_CODES.items():
+        sub = X[X[:, shape_col] == code]
+        if len(sub) == 0:
+            continue
+        out[shape] = {}
+        for j, name in enumerate(FEATURES):
+            vals = sub[:, j][np.isfinite(sub[:, j])]
+            if name in ("wound_shape", "skin_type", "stage") or len(vals) == 0:
+                continue
+            out[shape][name] = [float(vals.min()), float(vals.max())]
+    return out
+
+
+def fit_scheme(
+    scheme: str,
+    rows: pd.DataFrame,
+    X: np.ndarray,
+    skins: Mapping[str, float],
+    settings: ModelSettings,
+) -> SchemeFit:
+    """Split, bin on the training rows, train, and evaluate one scheme."""
+    q = settings.quantiles
+    stress = rows[STRESS].to_numpy(dtype=np.float64)
+    f_t, f_v = settings.train_fraction, settings.validation_fraction
+    if scheme == "random":
+        split = random_split(len(rows), f_t, f_v, settings.seed)
+    elif scheme == "geometry":
+        groups = geometry_groups(rows)
+        split = geometry_split(groups, f_t, f_v, settings.seed)
+    else:
+        raise AnalysisError(f"unknown split scheme {scheme!r} (expected one of {SCHEMES})")
+    for name, idx in split._asdict().items():
+        if len(idx) == 0:
+            extra = f" ({len(np.unique(groups))} geometries)" if scheme == "geometry" else ""
+            raise AnalysisError(
+                f"{scheme} split: empty {name} set from {len(rows)} rows{extra}; too few rows for the splits"
+            )
+    edges = quantile_edges(stress[split.train], q)
+    y = assign_quantiles(stress, edges)
+    test_classes = len(np.unique(y[split.test]))
+    if test_classes < 2:
+        raise AnalysisError(
+            f"{scheme} split: the test set ({len(split.test)} rows) holds {test_classes} quantile class; too few rows for the splits"
+        )
+    trained = train_model(X, y, split, settings)
+    probs = {
+        name: predict_proba(trained.booster, X[idx], settings.nthread)
+        for name, idx in split._asdict().items()
+    }
+    metrics = {
+        "split_rows": {name: int(len(idx)) for name, idx in split._asdict().items()},
+        "split_geometries": {
+            name: int(rows["geometry_id"].iloc[idx].nunique())
+            for name, idx in split._asdict().items()
+        },
+        "quantile_edges_kPa": edges.tolist(),
+        "quantile_edges_from": "training rows",
+        "best_iteration": trained.best_iteration,
+        "rounds_run": trained.rounds_run,
+        "eval_log": trained.eval_log,
+        **{name: evaluate(y[idx], probs[name]) for name, idx in split._asdict().items()},
+        "importance": feature_importance(trained.booster),
+    }
+    train_rows = rows.iloc[split.train]
+    meta = {
+        "format": MODEL_FORMAT,
+        "scheme": scheme,
+        "features": list(FEATURES),
+        "shape_codes": dict(SHAPE_CODES),
+        "skin_codes_c_kPa": {
+            k: float(v) for k, v in skins.items() if k in set(train_rows["skin_type"].astype(str))
+        },
+        "stages": sorted(int(s) for s in train_rows["stage"].unique()),
+        "ranges": feature_ranges(X[split.train]),
+        "quantiles": q,
+        "quantile_edges_kPa": edges.tolist(),
+        "stress": STRESS,
+        "best_iteration": trained.best_iteration,
+        "settings": dataclasses.asdict(settings),
+        "training_rows": int(len(split.train)),
+        "woundsweep_version": __version__,
+    }
+    return SchemeFit(scheme, split, edges, y, trained, probs["test"], metrics, meta)

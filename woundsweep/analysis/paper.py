@@ -1,0 +1,91 @@
+"""The paper's descriptive statistics: stiff against soft skin, and where the maximum sits."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from .settings import LOCATION_COLUMNS, STAGE_GROUPS, STRESS
+
+__all__ = ["LOCATION_NORMALISATION", "location_summary", "normalised_locations", "stiff_vs_soft"]
+
+# How `normalised_locations` scales each coordinate (recorded in metrics.json).
+LOCATION_NORMALISATION = {
+    "y_along": "(y + L) / 2L; closure zone ends at 1/3 and 2/3",
+    "x_across": "(x - w/2) / (L + w/2); 0 = wound mid-plane, +-1 = lateral faces",
+    "z_depth": "-z / T; 0 = skin surface, 1 = bottom face",
+}
+
+
+def stiff_vs_soft(rows: pd.DataFrame) -> tuple[dict[str, Any], pd.DataFrame]:
+    """Pair stiff and soft results of the same geometry, orientation and stage.
+
+    Returns per wound shape the number of pairs, how often stiff > soft, < soft or tied, the
+    fraction stiff > soft, and a two-sided sign test (binomial, p = 1/2, ties dropped); and
+    the pairs themselves (for the figure).
+    """
+    from scipy.stats import binomtest
+
+    key = ["geometry_id", "orientation_deg", "stage"]
+    cols = [*key, "wound_shape", STRESS]
+    skin = rows["skin_type"].astype(str)
+    stiff, soft = rows.loc[skin == "stiff", cols], rows.loc[skin == "soft", cols]
+    pairs = stiff.merge(soft.drop(columns="wound_shape"), on=key, suffixes=("_stiff", "_soft"))
+    pairs = pairs.rename(columns={f"{STRESS}_stiff": "stiff_kPa", f"{STRESS}_soft": "soft_kPa"})
+    out: dict[str, Any] = {}
+    for shape in sorted(pairs["wound_shape"].astype(str).unique()):
+        p = pairs[pairs["wound_shape"].astype(str) == shape]
+        greater = int((p["stiff_kPa"] > p["soft_kPa"]).sum())
+        less = int((p["stiff_kPa"] < p["soft_kPa"]).sum())
+        n = len(p)
+        out[shape] = {
+            "pairs": n,
+            "stiff_greater": greater,
+            "soft_greater": less,
+            "ties": n - greater - less,
+            "fraction_stiff_greater": greater / n,
+            "sign_test_p": float(binomtest(greater, greater + less, 0.5).pvalue)
+            if greater + less
+            else None,
+        }
+    return out, pairs.reset_index(drop=True)
+
+
+def normalised_locations(rows: pd.DataFrame) -> pd.DataFrame:
+    """Where the maximum sits, scaled by the patch (rows with a location only).
+
+    ``y_along`` = (y + L) / 2L: 0 and 1 at the patch ends, the closure zone's ends at 1/3 and
+    2/3. ``x_across`` = (x - w/2) / (L + w/2): 0 on the wound's mid-plane, -1 and +1 at the
+    lateral faces. ``z_depth`` = -z / T: 0 at the skin surface, 1 at the bottom face.
+    """
+    loc = rows.dropna(subset=list(LOCATION_COLUMNS))
+    L, w, T = (
+        loc[c].to_numpy(dtype=float)
+        for c in ("patch_half_length_mm", "wound_width_mm", "total_thickness_mm")
+    )
+    stage = loc["stage"].to_numpy()
+    group = np.full(len(loc), "", dtype=object)
+    for name, stages in STAGE_GROUPS:
+        group[np.isin(stage, stages)] = name
+    return pd.DataFrame(
+        {
+            "stage_group": group,
+            "y_along": (loc["max_location_y_mm"].to_numpy(dtype=float) + L) / (2 * L),
+            "x_across": (loc["max_location_x_mm"].to_numpy(dtype=float) - w / 2) / (L + w / 2),
+            "z_depth": -loc["max_location_z_mm"].to_numpy(dtype=float) / T,
+        }
+    )
+
+
+def location_summary(locs: pd.DataFrame) -> dict[str, Any]:
+    """The ``max_location`` entry of metrics.json: normalisation, rows per group, outliers."""
+    return {
+        "normalisation": dict(LOCATION_NORMALISATION),
+        "rows": {name: int((locs["stage_group"] == name).sum()) for name, _ in STAGE_GROUPS},
+        "outside_unit_range": {
+            c: int(((locs[c] < (-1 if c == "x_across" else 0)) | (locs[c] > 1)).sum())
+            for c in ("y_along", "x_across", "z_depth")
+        },
+    }

@@ -1,0 +1,120 @@
+"""``woundsweep analyze``: every scheme fitted and evaluated, then metrics, models, figures, report.
+
+Settings are layered: `ModelSettings` defaults, the run's ``Sweep.analysis``, then the
+caller's overrides. Everything lands in ``RUN_DIR/analysis/`` (or ``out_dir``), each file
+written atomically.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
+from typing import Any, NamedTuple
+
+import numpy as np
+
+from .. import __version__
+from ..errors import AnalysisError
+from ..fsutil import atomic_write_bytes
+from .data import drop_orphans, encode_features, load_results, select_rows, sweep_settings
+from .fitting import fit_scheme
+from .model_io import json_bytes, save_model
+from .paper import location_summary, normalised_locations, stiff_vs_soft
+from .report import write_report
+from .settings import (
+    FEATURES,
+    IMPORTANCE_GROUPS,
+    MIN_ROWS_PER_QUANTILE,
+    SCHEMES,
+    STRESS,
+    resolve_settings,
+)
+
+__all__ = ["AnalysisOutput", "run_analysis"]
+
+
+class AnalysisOutput(NamedTuple):
+    """What `run_analysis` wrote."""
+
+    out_dir: Path
+    metrics: dict[str, Any]
+    files: list[Path]
+
+
+def run_analysis(
+    run_dir: str | Path,
+    overrides: Mapping[str, Any] | None = None,
+    schemes: Sequence[str] = SCHEMES,
+    out_dir: str | Path | None = None,
+    echo: Callable[[str], None] | None = None,
+) -> AnalysisOutput:
+    """Fit and evaluate each scheme; write metrics, models, figures and report.md.
+
+    Settings: `ModelSettings` defaults, then the run's ``Sweep.analysis``, then ``overrides``.
+    ``echo`` receives a line before each long step (training takes minutes on 70k rows).
+    """
+    say = echo or (lambda _line: None)
+    import xgboost as xgb
+
+    from . import figures
+
+    rd = Path(run_dir)
+    if not rd.is_dir():
+        raise AnalysisError(f"{rd}: no such run directory")
+    for s in schemes:
+        if s not in SCHEMES:
+            raise AnalysisError(f"unknown split scheme {s!r} (expected one of {SCHEMES})")
+    sweep_analysis, skins = sweep_settings(rd)
+    settings = resolve_settings(sweep_analysis, overrides)
+    q = settings.quantiles
+    results, orphans = drop_orphans(load_results(rd), rd)
+    rows, counts = select_rows(results)
+    counts["rows_not_in_manifest"] = orphans
+    if len(rows) < MIN_ROWS_PER_QUANTILE * q:
+        raise AnalysisError(
+            f"{len(rows)} usable rows: at least {MIN_ROWS_PER_QUANTILE * q} are needed for {q} quantiles "
+            "and the train/validation/test splits"
+        )
+    X = encode_features(rows, skins)
+    fits = []
+    for s in schemes:
+        say(f"training the {s} split model on {len(rows)} rows ({q} quantiles)...")
+        fits.append(fit_scheme(s, rows, X, skins, settings))
+    svs, pairs = stiff_vs_soft(rows)
+    locs = normalised_locations(rows)
+    stress = rows[STRESS].to_numpy(dtype=np.float64)
+    metrics: dict[str, Any] = {
+        "woundsweep_version": __version__,
+        "xgboost_version": xgb.__version__,
+        "stress": STRESS,
+        "stress_units": "kPa",
+        "features": list(FEATURES),
+        "importance_groups": {k: list(v) for k, v in IMPORTANCE_GROUPS.items()},
+        "settings": dataclasses.asdict(settings),
+        "rows": counts,
+        "stress_summary_kPa": {
+            "min": float(stress.min()),
+            "median": float(np.median(stress)),
+            "max": float(stress.max()),
+            "all_rows_quantile_edges": np.quantile(stress, np.linspace(0, 1, q + 1)).tolist(),
+        },
+        "schemes": {f.scheme: f.metrics for f in fits},
+        "stiff_vs_soft": svs,
+        "max_location": location_summary(locs),
+    }
+    out = Path(out_dir) if out_dir is not None else rd / "analysis"
+    out.mkdir(parents=True, exist_ok=True)
+    files: list[Path] = []
+    for f in fits:
+        files += save_model(out, f)
+    say("writing figures...")
+    figs = figures.write_all(out, fits, stress, rows["stage"].to_numpy(), pairs, svs, locs)
+    files += figs
+    metrics_path = out / "metrics.json"
+    atomic_write_bytes(metrics_path, json_bytes(metrics))
+    files.append(metrics_path)
+    report_path = out / "report.md"
+    write_report(report_path, metrics, [p.name for p in figs])
+    files.append(report_path)
+    return AnalysisOutput(out, metrics, files)

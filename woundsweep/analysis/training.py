@@ -1,0 +1,55 @@
+"""XGBoost ``multi:softprob`` on the quantile classes, with early stopping on validation."""
+
+from __future__ import annotations
+
+from typing import Any, NamedTuple
+
+import numpy as np
+
+from .settings import FEATURES, ModelSettings
+from .splits import Split
+
+__all__ = ["Trained", "predict_proba", "train_model"]
+
+
+class Trained(NamedTuple):
+    """A booster cut to its best round, with the per-round evaluation log."""
+
+    booster: Any  # xgboost.Booster
+    best_iteration: int  # 0-based; the booster holds rounds 0..best_iteration
+    rounds_run: int
+    eval_log: dict[str, dict[str, list[float]]]
+
+
+def _dmatrix(X: np.ndarray, y: np.ndarray | None = None, nthread: int = 2) -> Any:
+    import xgboost as xgb
+
+    return xgb.DMatrix(X, label=y, feature_names=list(FEATURES), missing=np.nan, nthread=nthread)
+
+
+def train_model(X: np.ndarray, y: np.ndarray, split: Split, settings: ModelSettings) -> Trained:
+    """Boost on the training rows, stop early on the validation log loss."""
+    import xgboost as xgb
+
+    dtrain = _dmatrix(X[split.train], y[split.train], settings.nthread)
+    dval = _dmatrix(X[split.validation], y[split.validation], settings.nthread)
+    log: dict[str, dict[str, list[float]]] = {}
+    booster = xgb.train(
+        settings.xgb_params(),
+        dtrain,
+        num_boost_round=settings.n_estimators,
+        evals=[(dtrain, "train"), (dval, "validation")],
+        early_stopping_rounds=settings.early_stopping_rounds,
+        evals_result=log,
+        verbose_eval=False,
+    )
+    rounds = booster.num_boosted_rounds()
+    best = int(getattr(booster, "best_iteration", rounds - 1))
+    log = {s: {m: [float(v) for v in vals] for m, vals in ms.items()} for s, ms in log.items()}
+    return Trained(booster[: best + 1], best, rounds, log)
+
+
+def predict_proba(booster: Any, X: np.ndarray, nthread: int = 2) -> np.ndarray:
+    """Class probabilities (rows x q), renormalised in float64 (XGBoost sums in float32)."""
+    prob = np.asarray(booster.predict(_dmatrix(X, nthread=nthread)), dtype=np.float64)
+    return prob / prob.sum(axis=1, keepdims=True)

@@ -1,0 +1,171 @@
+"""Per-geometry mesh cache: ``RUN_DIR/meshes/<geometry_id>.npz``, written atomically.
+
+The nine jobs of a geometry (skin types x orientations) share one mesh. A cached file is used
+only when it validates completely: it opens, holds the five arrays with the right dtypes and
+consistent shapes, node indices and tags are in range, the SHA-256 of the arrays matches the
+one stored beside them, and it was built from the same `GeometrySpec` with the current
+`MESH_LAW_VERSION`. Anything else (truncated, corrupt, stale) is rebuilt and replaced; the
+temporary file + ``os.replace`` write means readers never see a partial file.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import re
+from pathlib import Path
+from typing import Any, NamedTuple
+
+import numpy as np
+
+from ..errors import StoreError
+from ..fsutil import atomic_write
+from ..schema import CELL_TAGS, FACET_TAGS
+from .build import MeshData, build_mesh
+from .sizing import MESH_LAW_VERSION
+from .spec import GeometrySpec
+
+__all__ = [
+    "CACHE_FORMAT",
+    "CachedMesh",
+    "get_mesh",
+    "load_mesh",
+    "mesh_checksum",
+    "mesh_path",
+    "save_mesh",
+]
+
+CACHE_FORMAT = 1
+_ID = re.compile(r"^[0-9a-f]{16}$")
+# name -> (dtype, trailing shape)
+_ARRAYS: dict[str, tuple[np.dtype, tuple[int, ...]]] = {
+    "points": (np.dtype(np.float64), (3,)),
+    "cells": (np.dtype(np.int64), (4,)),
+    "cell_tags": (np.dtype(np.int32), ()),
+    "facets": (np.dtype(np.int64), (3,)),
+    "facet_tags": (np.dtype(np.int32), ()),
+}
+
+
+class CachedMesh(NamedTuple):
+    """A mesh from the cache: ``status`` is ``cached``, ``built`` (no file) or ``rebuilt``."""
+
+    mesh: MeshData
+    path: Path
+    status: str
+    reason: str  # why a cached file was rejected ("" unless rebuilt)
+
+
+def mesh_path(run_dir: str | Path, geometry_id: str) -> Path:
+    """Cache file of a geometry (the id is the manifest's 16-hex ``geometry_id``)."""
+    if not isinstance(geometry_id, str) or not _ID.match(geometry_id):
+        raise StoreError(f"geometry id {geometry_id!r} is not 16 lowercase hex characters")
+    return Path(run_dir) / "meshes" / f"{geometry_id}.npz"
+
+
+def mesh_checksum(mesh: MeshData) -> str:
+    """SHA-256 over the arrays' names, dtypes, shapes and bytes."""
+    digest = hashlib.sha256()
+    for name in _ARRAYS:
+        arr = np.ascontiguousarray(getattr(mesh, name))
+        digest.update(f"{name}:{arr.dtype.str}:{arr.shape};".encode())
+        digest.update(arr.tobytes())
+    return digest.hexdigest()
+
+
+def save_mesh(path: str | Path, mesh: MeshData, spec: GeometrySpec, geometry_id: str) -> None:
+    """Write ``mesh`` atomically with its spec, law version and checksum."""
+    meta = {
+        "format": CACHE_FORMAT,
+        "mesh_law_version": MESH_LAW_VERSION,
+        "geometry_id": geometry_id,
+        "spec": spec.to_dict(),
+        "checksum": mesh_checksum(mesh),
+        "info": mesh.info,
+    }
+    blob = np.frombuffer(json.dumps(meta, sort_keys=True).encode(), dtype=np.uint8)
+
+    def _write(tmp: str) -> None:
+        # A file object, not a name: np.savez would append ".npz" to the temporary name.
+        with open(tmp, "wb") as fh:
+            np.savez(fh, meta=blob, **{name: getattr(mesh, name) for name in _ARRAYS})
+
+    atomic_write(path, _write)
+
+
+def load_mesh(
+    path: str | Path, spec: GeometrySpec | None = None, geometry_id: str | None = None
+) -> MeshData:
+    """Read and validate a cached mesh; StoreError (one line, the reason) if it is unusable."""
+    path = Path(path)
+    try:
+        with np.load(path, allow_pickle=False) as npz:
+            arrays = {name: npz[name] for name in (*_ARRAYS, "meta")}
+    except FileNotFoundError:
+        raise StoreError(f"{path}: no cached mesh") from None
+    except Exception as err:  # zipfile/numpy raise many types for damaged files
+        raise StoreError(f"{path}: unreadable ({type(err).__name__}: {err})") from None
+    try:
+        meta = json.loads(arrays.pop("meta").tobytes().decode())
+    except (UnicodeDecodeError, ValueError) as err:
+        raise StoreError(f"{path}: unreadable metadata ({err})") from None
+    problem = _check(arrays, meta, spec, geometry_id)
+    if problem:
+        raise StoreError(f"{path}: {problem}")
+    info = dict(meta["info"])
+    return MeshData(info=info, **arrays)
+
+
+def _check(
+    arrays: dict[str, np.ndarray],
+    meta: Any,
+    spec: GeometrySpec | None,
+    geometry_id: str | None,
+) -> str:
+    """The first reason the cached arrays cannot be used, or ''."""
+    if not isinstance(meta, dict) or meta.get("format") != CACHE_FORMAT:
+        return "unknown cache format"
+    if meta.get("mesh_law_version") != MESH_LAW_VERSION:
+        return f"built with mesh law {meta.get('mesh_law_version')}, now {MESH_LAW_VERSION}"
+    if geometry_id is not None and meta.get("geometry_id") != geometry_id:
+        return f"holds geometry {meta.get('geometry_id')}, not {geometry_id}"
+    if spec is not None and meta.get("spec") != json.loads(json.dumps(spec.to_dict())):
+        return "built from other geometric parameters"
+    for name, (dtype, tail) in _ARRAYS.items():
+        arr = arrays[name]
+        if arr.dtype != dtype or arr.shape[1:] != tail or arr.ndim != 1 + len(tail):
+            return f"{name} has dtype {arr.dtype} and shape {arr.shape}"
+    n, m, k = len(arrays["points"]), len(arrays["cells"]), len(arrays["facets"])
+    if min(n, m, k) == 0:
+        return "empty mesh"
+    if len(arrays["cell_tags"]) != m or len(arrays["facet_tags"]) != k:
+        return "tag arrays do not match the cells/facets"
+    for name in ("cells", "facets"):
+        if arrays[name].min() < 0 or arrays[name].max() >= n:
+            return f"{name} refer to missing nodes"
+    if not np.isin(arrays["cell_tags"], list(CELL_TAGS.values())).all():
+        return "unknown cell tags"
+    if not np.isin(arrays["facet_tags"], list(FACET_TAGS.values())).all():
+        return "unknown facet tags"
+    if not np.isfinite(arrays["points"]).all():
+        return "non-finite coordinates"
+    info = meta.get("info")
+    if not isinstance(info, dict):
+        return "missing mesh info"
+    if mesh_checksum(MeshData(info=info, **arrays)) != meta.get("checksum"):
+        return "checksum mismatch"
+    return ""
+
+
+def get_mesh(run_dir: str | Path, geometry_id: str, spec: GeometrySpec) -> CachedMesh:
+    """The geometry's mesh: the cached one if valid, else built (GeometryError) and cached."""
+    path = mesh_path(run_dir, geometry_id)
+    reason = ""
+    if path.exists():
+        try:
+            return CachedMesh(load_mesh(path, spec, geometry_id), path, "cached", "")
+        except StoreError as err:
+            reason = str(err)
+    mesh = build_mesh(spec)
+    save_mesh(path, mesh, spec, geometry_id)
+    return CachedMesh(mesh, path, "rebuilt" if reason else "built", reason)

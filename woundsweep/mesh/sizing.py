@@ -1,0 +1,75 @@
+"""The mesh size law (version ``MESH_LAW_VERSION``): target edge length at a point (pure Python).
+
+With D the distance (mm) from the wound surface, zeta = max(0, -z - t_d) / t_d the depth
+below the layer interface in dermal thicknesses, m the mesh size factor and
+s = (0.5 / m)^(2/3)::
+
+    h = s * min(h_w + 0.5 D,  (0.7 t_d + 0.1 D) (1 + 0.75 zeta),  L / 4),
+    h_w = min(t_d / 3, w / 6)
+
+All lengths scale with the geometry, so the cell count depends (up to OCC's absolute
+tolerances) only on the dimensionless factors; every term scales with s, so a larger factor
+gives a uniformly finer field. Fine at the wound (h_w resolves both the dermis and the wound
+width), graded away from it, finer in the dermis than in the subcutis, coarser with depth,
+and never coarser than s L / 4 (eight cells along the wound length at m = 0.5). On the 1,296
+paper geometries (benchmarks/bench_geometry.py --all): min / median / max cells
+2.6k / 4.5k / 8.4k at m = 0.3, 4.6k / 7.4k / 15.1k at m = 0.5, 6.8k / 11.6k / 24.6k at
+m = 0.7; the count rises strictly with m for every geometry. Minimum SICN is 0.053 over the
+grid; the few meshes below 0.1 are cylinders whose bottom is tangent to (or within 2% of) the
+layer interface, where the dermis between wound and subcutis thins to a cusp.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from types import MappingProxyType
+
+from .spec import GeometrySpec, wound_distance_mm
+
+__all__ = ["MESH_LAW_VERSION", "PAPER_CELL_CAP", "SIZE_LAW", "mesh_size_mm"]
+
+# Bumped whenever the geometry or the size law changes: cached meshes of another version
+# are rebuilt.
+MESH_LAW_VERSION = 1
+# The paper omitted models above 40,000 cells; the size law keeps every paper geometry below.
+PAPER_CELL_CAP = 40_000
+
+# Constants of the size law in the module docstring.
+SIZE_LAW: Mapping[str, float] = MappingProxyType(
+    {
+        "reference_factor": 0.5,  # m at which s = 1
+        "factor_exponent": 2.0 / 3.0,  # s = (0.5 / m) ** exponent
+        "wound_per_dermis": 1.0 / 3.0,  # h_w <= t_d / 3
+        "wound_per_width": 1.0 / 6.0,  # h_w <= w / 6
+        "wound_growth": 0.5,  # dh/dD near the wound
+        "layer_per_dermis": 0.7,  # dermis size away from the wound, in t_d
+        "layer_growth": 0.1,  # slow lateral coarsening far from the wound
+        "depth_growth": 0.75,  # relative growth per t_d below the interface
+        "patch_fraction": 0.25,  # h <= L / 4
+    }
+)
+
+
+def _size_scale(mesh_size_factor: float) -> float:
+    return (SIZE_LAW["reference_factor"] / mesh_size_factor) ** SIZE_LAW["factor_exponent"]
+
+
+def _wound_size(spec: GeometrySpec) -> float:
+    return min(
+        SIZE_LAW["wound_per_dermis"] * spec.dermal_thickness_mm,
+        SIZE_LAW["wound_per_width"] * spec.wound_width_mm,
+    )
+
+
+def mesh_size_mm(spec: GeometrySpec, x: float, y: float, z: float) -> float:
+    """Target edge length (mm) at a point: the size law of the module docstring."""
+    del y  # the wound and the layers are uniform along y
+    t_d = spec.dermal_thickness_mm
+    dist = wound_distance_mm(spec, x, z)
+    zeta = max(0.0, -z - t_d) / t_d
+    near = _wound_size(spec) + SIZE_LAW["wound_growth"] * dist
+    layer = (SIZE_LAW["layer_per_dermis"] * t_d + SIZE_LAW["layer_growth"] * dist) * (
+        1.0 + SIZE_LAW["depth_growth"] * zeta
+    )
+    cap = SIZE_LAW["patch_fraction"] * spec.patch_half_length_mm
+    return _size_scale(spec.mesh_size_factor) * min(near, layer, cap)

@@ -1,0 +1,245 @@
+"""The discretised wound patch: the DOLFINx mesh, its P1 space and the sets the stages act on.
+
+`WoundDomain` holds the node and facet sets of the boundary conditions (x and y faces, deep
+face), the wound's mirror plane and depth, the closure zone on both flanks, the two point
+constraints that remove rigid in-plane motion, the facet tags of the solver's integrals, and
+the cellwise kinematics of P1 fields (gradient, det F). Node indices are DOLFINx dof-node
+indices (dof ``3 i + c`` is component c of node i); ``input_node`` maps input points to them.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from .. import compat
+from ..contact.geometry import owning_cells
+from ..schema import BOTTOM, DERMIS, SUBCUTIS, WOUND, X_MAX, X_MIN, Y_MAX, Y_MIN
+
+__all__ = [
+    "LATERAL_DERMIS",
+    "LATERAL_SUBCUTIS",
+    "ZONE_LEFT",
+    "ZONE_RIGHT",
+    "ClosureZone",
+    "WoundDomain",
+    "dof_rows",
+]
+
+# Facet ids the solver derives for its integrals (not part of the mesh contract).
+LATERAL_DERMIS, LATERAL_SUBCUTIS, ZONE_LEFT, ZONE_RIGHT = 101, 102, 103, 104
+
+
+@dataclasses.dataclass(frozen=True)
+class ClosureZone:
+    """Where primary intention acts: the middle ``y_fraction`` of the wound length (|y - y_c| <=
+    y_fraction * L_y, L_y the patch half-length) and the upper ``depth_fraction`` of its depth."""
+
+    y_fraction: float = 1.0 / 3.0
+    depth_fraction: float = 0.5
+
+    @classmethod
+    def from_sweep(cls, stages: Mapping[str, Any] | None) -> ClosureZone:
+        zone = (stages or {}).get("closure_zone", {})
+        return cls(
+            float(zone.get("y_fraction", cls.y_fraction)),
+            float(zone.get("depth_fraction", cls.depth_fraction)),
+        )
+
+
+def dof_rows(nodes: Any, comp: int) -> np.ndarray:
+    """Flat dof indices of component ``comp`` of ``nodes``."""
+    return (3 * np.asarray(nodes, dtype=np.int64) + comp).astype(np.int32)
+
+
+def _areas(p: np.ndarray) -> np.ndarray:
+    """Areas of triangles given as (k, 3, 3) vertex coordinates."""
+    return 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
+
+
+class WoundDomain:
+    """Mesh, space, index maps, boundary sets and closure zone of one wound patch.
+
+    ``mesh_data`` has the `MeshData` fields ``points``, ``cells``, ``cell_tags``, ``facets``,
+    ``facet_tags`` (docs/design.md). Raises ValueError for a mesh that does not fit the
+    contract (unused points, no deep face or x faces).
+    """
+
+    def __init__(self, mesh_data: Any, zone: ClosureZone | None = None) -> None:
+        self.zone_spec = zone or ClosureZone()
+        pts = np.asarray(mesh_data.points, dtype=float)
+        cells = np.asarray(mesh_data.cells, dtype=np.int64)
+        ctags = np.asarray(mesh_data.cell_tags, dtype=np.int32)
+        facets = np.asarray(mesh_data.facets, dtype=np.int64)
+        ftags = np.asarray(mesh_data.facet_tags, dtype=np.int32)
+        self.points, self.cells, self.cell_tags = pts, cells, ctags
+        self.facets, self.facet_tags = facets, ftags
+        self.mesh, self.cell_mt, self.facet_mt = compat.mesh_from_arrays(
+            pts, cells, ctags, facets, ftags
+        )
+        self.V = compat.vector_space(self.mesh)
+        self.node_input = compat.node_input_index(self.V)
+        self.cell_input = compat.cell_input_index(self.mesh)
+        n_nodes = len(self.node_input)
+        self.input_node = np.full(len(pts), -1, dtype=np.int64)
+        self.input_node[self.node_input] = np.arange(n_nodes)
+        if np.any(self.input_node < 0):
+            raise ValueError("the mesh has points that belong to no cell")
+        self.X = pts[self.node_input]  # reference coordinates of the nodes
+        self.cell_nodes = compat.cell_dofs(self.V)  # (m, 4) node indices, mesh cell order
+        self._prepare_kinematics()
+        self._classify(facets, ftags)
+
+    @property
+    def n_dofs(self) -> int:
+        return 3 * len(self.X)
+
+    def wound_facets(self) -> np.ndarray:
+        """The wound surface's facets (k, 3) in node indices."""
+        return self.input_node[self.facets[self.facet_tags == WOUND]]
+
+    # -- kinematics -------------------------------------------------------------------------
+
+    def _prepare_kinematics(self) -> None:
+        Xc = self.X[self.cell_nodes]  # (m, 4, 3)
+        Dm = np.transpose(Xc[:, 1:, :] - Xc[:, :1, :], (0, 2, 1))  # columns = edges
+        det = np.linalg.det(Dm)
+        self.ref_det = det
+        self.volumes = np.abs(det) / 6.0
+        self.Dm_inv = np.linalg.inv(Dm)
+        self.midpoints = Xc.mean(axis=1)
+        lo, hi = self.points.min(axis=0), self.points.max(axis=0)
+        self.bbox = (lo, hi)
+        self.ell = float(np.linalg.norm(hi - lo))
+
+    def grad(self, w: np.ndarray) -> np.ndarray:
+        """Cellwise gradient (m, 3, 3) of a P1 vector field given as flat dofs."""
+        W = w.reshape(-1, 3)[self.cell_nodes]
+        Dw = np.transpose(W[:, 1:, :] - W[:, :1, :], (0, 2, 1))
+        return Dw @ self.Dm_inv
+
+    def min_det(self, u: np.ndarray) -> float:
+        """Smallest cellwise det F at displacement ``u``."""
+        G = self.grad(u)
+        G[:, 0, 0] += 1.0
+        G[:, 1, 1] += 1.0
+        G[:, 2, 2] += 1.0
+        return float(np.linalg.det(G).min())
+
+    def max_strain(self, du: np.ndarray) -> float:
+        """Largest cellwise Frobenius norm of grad(du)."""
+        return float(np.sqrt(np.max(np.sum(self.grad(du) ** 2, axis=(1, 2)), initial=0.0)))
+
+    # -- boundary sets ----------------------------------------------------------------------
+
+    def _nodes_of(self, mask: np.ndarray) -> np.ndarray:
+        return np.unique(self.input_node[np.unique(self.facets[mask])])
+
+    def _classify(self, facets: np.ndarray, ftags: np.ndarray) -> None:
+        """Node sets for the boundary conditions and derived facet tags for the integrals."""
+        self.x_face_nodes = self._nodes_of(np.isin(ftags, (X_MIN, X_MAX)))
+        self.y_face_nodes = self._nodes_of(np.isin(ftags, (Y_MIN, Y_MAX)))
+        self.bottom_nodes = self._nodes_of(ftags == BOTTOM)
+        if len(self.bottom_nodes) == 0 or len(self.x_face_nodes) == 0:
+            raise ValueError("the mesh has no tagged deep face or x faces")
+        lo, hi = self.bbox
+        self.x_c = 0.5 * (lo[0] + hi[0])
+        self.y_c = 0.5 * (lo[1] + hi[1])
+        self.half_length_y = 0.5 * (hi[1] - lo[1])
+        self.z_top = float(hi[2])
+        zone_left, zone_right = self._closure_zone(facets, ftags)
+        self.zone_left_facets = facets[zone_left]
+        self.zone_right_facets = facets[zone_right]
+        self.zone_left_nodes = self.zone_nodes[self.X[self.zone_nodes, 0] < self.x_c]
+        self.zone_right_nodes = self.zone_nodes[self.X[self.zone_nodes, 0] >= self.x_c]
+        lateral = np.flatnonzero(np.isin(ftags, (X_MIN, X_MAX, Y_MIN, Y_MAX)))
+        owner = owning_cells(self.cells, facets[lateral], len(self.points))
+        layer = np.where(self.cell_tags[owner] == DERMIS, LATERAL_DERMIS, LATERAL_SUBCUTIS)
+        area = _areas(self.points[facets[lateral]])
+        on_xmax = ftags[lateral] == X_MAX
+        self.x_max_area = {
+            DERMIS: float(area[on_xmax & (layer == LATERAL_DERMIS)].sum()),
+            SUBCUTIS: float(area[on_xmax & (layer == LATERAL_SUBCUTIS)].sum()),
+        }
+        sel = np.concatenate([lateral, zone_left, zone_right])
+        vals = np.concatenate(
+            [layer, np.full(len(zone_left), ZONE_LEFT), np.full(len(zone_right), ZONE_RIGHT)]
+        )
+        self.solver_facet_mt = compat.facet_meshtags(self.mesh, facets[sel], vals)
+        self._point_constraints()
+
+    def _closure_zone(self, facets: np.ndarray, ftags: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Set the wound's mirror plane, depth and zone nodes; return the zone's facet indices
+        on the left and right flank."""
+        wound_mask = ftags == WOUND
+        self.has_wound = bool(wound_mask.any())
+        empty = np.zeros(0, dtype=np.int64)
+        self.zone_nodes = empty
+        self.wound_depth = 0.0
+        if not self.has_wound:
+            return empty, empty
+        tol = 1e-9 * self.ell
+        p = self.points
+        wound_pts = np.unique(facets[wound_mask])
+        wx = p[wound_pts, 0]
+        # The wound's mirror plane; the patch centre for the symmetric paper geometries.
+        self.x_c = 0.5 * (wx.min() + wx.max())
+        self.wound_depth = float(self.z_top - p[wound_pts, 2].min())
+        y_lim = self.zone_spec.y_fraction * self.half_length_y + tol
+        z_lim = self.z_top - self.zone_spec.depth_fraction * self.wound_depth - tol
+        in_zone = np.zeros(len(p), dtype=bool)
+        in_zone[wound_pts] = (np.abs(p[wound_pts, 1] - self.y_c) <= y_lim) & (
+            p[wound_pts, 2] >= z_lim
+        )
+        self.zone_nodes = np.unique(self.input_node[np.flatnonzero(in_zone)])
+        wf = np.flatnonzero(wound_mask)
+        zf = wf[np.all(in_zone[facets[wf]], axis=1)]
+        left = p[facets[zf]].mean(axis=1)[:, 0] < self.x_c
+        return zf[left], zf[~left]
+
+    def _point_constraints(self) -> None:
+        """Minimal in-plane gauge for stages 2+: nodes of the deep face near its centre line."""
+        zb = self.X[self.bottom_nodes]
+
+        def nearest(target: tuple[float, float]) -> int:
+            d = (zb[:, 0] - target[0]) ** 2 + (zb[:, 1] - target[1]) ** 2
+            return int(self.bottom_nodes[np.argmin(d)])
+
+        self.pin_a = nearest((self.x_c, self.y_c))
+        self.pin_b = nearest((self.x_c, self.y_c + 0.5 * self.half_length_y))
+
+    def pin_rows(self) -> np.ndarray:
+        """Dofs of the point constraints: u_x, u_y at ``pin_a``, u_x at ``pin_b``."""
+        return np.concatenate(
+            [dof_rows([self.pin_a], 0), dof_rows([self.pin_a], 1), dof_rows([self.pin_b], 0)]
+        )
+
+    def gauge_rows(self) -> np.ndarray:
+        """Dofs held in stages 2-6: u_z of the deep face and the point constraints."""
+        return np.concatenate([dof_rows(self.bottom_nodes, 2), self.pin_rows()])
+
+    # -- measures of a state ----------------------------------------------------------------
+
+    def deformed_zone_area(self, side: str, u_input: np.ndarray) -> float:
+        """Deformed area (mm^2) of one flank's closure-zone facets (exact for P1) at the
+        displacement ``u_input`` (n_points, 3) in input point order."""
+        tri = self.zone_left_facets if side == "left" else self.zone_right_facets
+        if len(tri) == 0:
+            return 0.0
+        return float(_areas((self.points + u_input)[tri]).sum())
+
+    def closure_gap(self, u: np.ndarray) -> float:
+        """Widest x-opening between the flanks in the closure zone (mm, deformed; NaN if no zone).
+
+        max over left-flank zone nodes of (x_c - x) plus max over right-flank zone nodes of
+        (x - x_c), x the deformed position: 0 when closed, negative when the flanks overlap.
+        """
+        if len(self.zone_left_nodes) == 0 or len(self.zone_right_nodes) == 0:
+            return float("nan")
+        ux = u.reshape(-1, 3)[:, 0]
+        xl = self.X[self.zone_left_nodes, 0] + ux[self.zone_left_nodes]
+        xr = self.X[self.zone_right_nodes, 0] + ux[self.zone_right_nodes]
+        return float(np.max(self.x_c - xl) + np.max(xr - self.x_c))

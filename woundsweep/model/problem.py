@@ -1,0 +1,115 @@
+"""The nonlinear problem Newton solves: the wound model's residual, tangent and potential.
+
+`WoundProblem` joins the compiled forms (`WoundForms`) and the flank contact (a
+`woundsweep.contact.ContactModel`, or None for an unwounded patch) into the
+`woundsweep.solver.NonlinearProblem` protocol. The contact terms are added while the
+penalty is on (``contact.k_V_kPa > 0``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from petsc4py import PETSc
+
+from .. import compat
+from ..contact import ContactModel
+from .domain import WoundDomain
+from .forms import WoundForms
+
+__all__ = ["WoundProblem"]
+
+
+class WoundProblem:
+    """Residual R(u), tangent dR/du and potential of the wound model at the state ``forms.u``.
+
+    ``closure_follows``: the closure traction of stages 4-6 follows the deformed area (each
+    load increment's state, moved to the converged state in `refresh`) instead of being a
+    dead load on the stage-2 area.
+    """
+
+    def __init__(
+        self,
+        domain: WoundDomain,
+        forms: WoundForms,
+        contact: ContactModel | None,
+        closure_follows: bool = False,
+    ) -> None:
+        self.domain, self.forms, self.contact = domain, forms, contact
+        self.closure_follows = closure_follows
+        self.A = compat.create_matrix(forms.a_form)
+
+    def _contact_on(self) -> ContactModel | None:
+        c = self.contact
+        return c if c is not None and c.k_V_kPa > 0.0 else None
+
+    # -- NonlinearProblem -------------------------------------------------------------------
+
+    def solution(self) -> np.ndarray:
+        return self.forms.u.x.array
+
+    def residual(self, b: PETSc.Vec) -> None:
+        compat.assemble_vector(b, self.forms.R_form)
+        c = self._contact_on()
+        if c is not None:
+            c.add_residual(b, self.solution())
+
+    def jacobian(self, A: PETSc.Mat) -> None:
+        compat.assemble_matrix(A, self.forms.a_form)
+        c = self._contact_on()
+        if c is not None:
+            c.add_jacobian(A, self.solution())
+
+    def energy(self) -> float | None:
+        """Total potential (mN mm) at the current state, or None while a load follows the
+        deformation (the stage-3 closure traction), when there is none."""
+        if float(self.forms.follow.value) != 0.0:
+            return None
+        e = compat.assemble_scalar(self.forms.Pi_form)
+        c = self._contact_on()
+        if c is not None:
+            e += c.energy(self.solution())
+        return e
+
+    def refresh(self, tol: float) -> bool:
+        """At a converged state: re-search a frozen contact pairing and move a following
+        closure traction's area state to the current one; True if either moved the forces
+        by more than ``tol`` (mN), so Newton goes on."""
+        u = self.solution()
+        c = self._contact_on()
+        moved = c is not None and c.refresh(u, tol)
+        if self.closure_follows and float(self.forms.follow.value) == 0.0 and not moved:
+            r_old = self.residual_array()
+            self.forms.u_area.x.array[:] = u
+            moved = bool(np.linalg.norm(self.residual_array() - r_old) > tol)
+        return moved
+
+    def min_det(self, u: np.ndarray) -> float:
+        return self.domain.min_det(u)
+
+    def max_strain(self, du: np.ndarray) -> float:
+        return self.domain.max_strain(du)
+
+    def length_scale(self) -> float:
+        return self.domain.ell
+
+    # -- helpers of the stages --------------------------------------------------------------
+
+    def residual_array(self) -> np.ndarray:
+        """R(u) at the current state as a flat array (reactions included)."""
+        b = self.forms.u_vec.duplicate()
+        self.residual(b)
+        return b.getArray(readonly=True).copy()
+
+    def internal_force(self) -> np.ndarray:
+        """Nodal internal forces at the current state (external loads and contact off)."""
+        saved = self.forms.loads()
+        c = self.contact
+        k_V = c.k_V_kPa if c is not None else 0.0
+        self.forms.set_loads(0.0, 0.0, 0.0)
+        if c is not None:
+            c.k_V_kPa = 0.0
+        r = self.residual_array()
+        self.forms.set_loads(*saved)
+        if c is not None:
+            c.k_V_kPa = k_V
+        return r

@@ -1,0 +1,32 @@
+"""Nonlinear solution algorithms, apart from any model: Newton and load continuation.
+
+`NewtonSettings` (`woundsweep.solver.settings`) is pure Python; the solvers need petsc4py
+and are loaded on first use. The function `continuation` is imported from its module,
+`woundsweep.solver.continuation`.
+"""
+
+from __future__ import annotations
+
+from ..lazy import lazy_exports
+from .settings import NewtonSettings
+
+__all__ = [
+    "ContinuationResult",
+    "LoadState",
+    "NewtonResult",
+    "NewtonSettings",
+    "NewtonSolver",
+    "NonlinearProblem",
+    "Policy",
+]
+
+_LAZY = {
+    "ContinuationResult": "continuation",
+    "LoadState": "continuation",
+    "NewtonResult": "newton",
+    "NewtonSolver": "newton",
+    "NonlinearProblem": "newton",
+    "Policy": "newton",
+}
+
+__getattr__, __dir__ = lazy_exports(__name__, _LAZY)

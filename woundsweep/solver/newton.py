@@ -1,0 +1,432 @@
+"""Newton's method with adaptive relaxation over assembled PETSc objects.
+
+One Newton step solves ``J du = -R`` (MUMPS LU, KSP ``preonly``) and applies ``u += gamma du``.
+The relaxation factor gamma follows a FIRE-like rule: it shrinks (x0.5) when an update is too
+large (its largest cellwise displacement-gradient increment exceeds ``max_strain_step``), when
+it would invert an element (min J <= 0), or when the residual grows; it grows (x2, up to 1)
+after every step accepted without shrinking.
+
+With ``Policy.energy_merit`` and a problem that has a potential E (`NonlinearProblem.energy`
+not None; the contact stages, whose loads are all dead), updates are accepted by Armijo's rule
+on E instead of the residual rule, and a Newton step that does not descend E (an indefinite
+tangent: an unstable equilibrium nearby) or finds no acceptable relaxation is replaced by the
+step of the tangent with its free diagonal scaled by 1 + mu (mu = 1e-4 ... 1e4, x10, the first
+that descends; modified Newton), so every update lowers E and the iterates move toward a
+stable equilibrium (`NewtonSolver._relax`, `NewtonSolver._shifted`).
+
+Dirichlet conditions are imposed strongly by row elimination on flat dof indices: the
+constrained rows of J become identity rows and the right-hand side holds ``g - u`` there, so
+a step with gamma = 1 meets them exactly. The matrix keeps its nonzero pattern, so MUMPS's
+symbolic factorisation is done once per matrix and only the numeric one per step.
+
+Convergence (``stol`` is relative to the problem's length scale ``ell``):
+``||R_free||_2 <= atol + rtol * f_scale`` and ``max |g - u| <= stol * ell`` and the last
+increment ``||du||_inf <= stol * ell``. ``f_scale`` is the larger of the given force scale
+and the current full residual norm (reactions included), unless ``Policy.fixed_scale``. When
+the residual test passes but the increment test does not, one chord step (reusing the
+factorisation) measures the increment. At a converged state the problem's `refresh` hook
+may report that a frozen part of its linearisation moved the forces: Newton then goes on.
+
+Statuses (`woundsweep.schema.StageStatus`): converged, max-iterations, diverged (non-finite or
+exploding residual, or no acceptable relaxation), inverted (every relaxation inverts an
+element), linear-solver-failed (factorisation error or non-finite solution).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from typing import NamedTuple, Protocol
+
+import numpy as np
+from petsc4py import PETSc
+
+from ..schema import StageStatus
+from .settings import NewtonSettings
+
+__all__ = ["NewtonResult", "NewtonSolver", "NonlinearProblem", "Policy"]
+
+_log = logging.getLogger(__name__)
+LINEAR_RTOL = 1e-6  # accepted relative residual of a direct solve
+ENERGY_GAMMA_MIN = 2.0**-20  # smallest relaxation tried under the energy merit
+CONVERGED = StageStatus.CONVERGED
+MAX_ITERATIONS = StageStatus.MAX_ITERATIONS
+DIVERGED = StageStatus.DIVERGED
+INVERTED = StageStatus.INVERTED
+LINEAR_SOLVER_FAILED = StageStatus.LINEAR_SOLVER_FAILED
+
+
+class Policy(NamedTuple):
+    """How one stage's Newton solves are run and judged."""
+
+    settings: NewtonSettings
+    energy_merit: bool = False  # accept updates by Armijo's rule on the potential
+    fixed_scale: bool = False  # the force scale stays the given one (not grown by |R|)
+
+
+class NonlinearProblem(Protocol):
+    """What Newton needs from a discretised problem (all arrays in dof order, flat)."""
+
+    def solution(self) -> np.ndarray:
+        """Writable view of the current displacement dofs."""
+        ...
+
+    def residual(self, b: PETSc.Vec) -> None:
+        """Assemble R(u) into ``b`` (no boundary conditions applied)."""
+        ...
+
+    def jacobian(self, A: PETSc.Mat) -> None:
+        """Assemble dR/du into ``A`` (finalised, no boundary conditions applied)."""
+        ...
+
+    def energy(self) -> float | None:
+        """The potential (mN mm) whose gradient is R at the current state, or None when the
+        loads have none (a follower load)."""
+        ...
+
+    def refresh(self, tol: float) -> bool:
+        """At a converged state: update a frozen part of the linearisation (the contact
+        pairing); True if that moved the forces by more than ``tol`` (mN)."""
+        ...
+
+    def min_det(self, u: np.ndarray) -> float:
+        """Smallest cellwise det F at displacement ``u``."""
+        ...
+
+    def max_strain(self, du: np.ndarray) -> float:
+        """Largest cellwise Frobenius norm of grad(du)."""
+        ...
+
+    def length_scale(self) -> float:
+        """A length (mm) for the increment tolerance."""
+        ...
+
+
+class NewtonResult(NamedTuple):
+    """Outcome of one Newton solve (one load increment)."""
+
+    status: str
+    iterations: int
+    residual_norm: float
+    force_scale: float
+    min_det: float
+    assembly_time_s: float
+    factor_time_s: float
+    solve_time_s: float
+    residual_time_s: float
+
+
+class _Step(NamedTuple):
+    """An accepted update: relaxation, whether it was reduced, and the new state's data."""
+
+    gamma: float
+    shrunk: bool
+    r: np.ndarray
+    min_det: float
+    residual_time_s: float
+    factor_time_s: float
+
+
+class NewtonSolver:
+    """Relaxed Newton over assembled PETSc objects; reuse one instance across stages."""
+
+    def __init__(self, problem: NonlinearProblem, A: PETSc.Mat, settings: NewtonSettings) -> None:
+        self.problem = problem
+        self.settings = settings  # the default policy's
+        self._policy = Policy(settings)  # the policy of the solve in progress
+        self.A = A
+        # Rows keep their nonzero slots when zeroed, so the symbolic factorisation stays valid.
+        self.A.setOption(PETSc.Mat.Option.KEEP_NONZERO_PATTERN, True)
+        self.b, self.dx = A.createVecs()[1], A.createVecs()[0]
+        self.rvec = self.b.duplicate()
+        self.ksp = PETSc.KSP().create(A.getComm())
+        self.ksp.setOperators(A)
+        self.ksp.setType("preonly")
+        pc = self.ksp.getPC()
+        pc.setType("lu")
+        pc.setFactorSolverType("mumps")
+        self.ksp.setErrorIfNotConverged(False)
+        self._factored = False
+        self._factored_rows = np.zeros(0, dtype=np.int32)
+        self.gamma = 1.0
+        self._mu = 0.0  # the last shift that gave a descent step (`_shifted`; see `reset`)
+
+    def reset(self) -> None:
+        """Forget the adaptive state (relaxation, shift) at the start of a stage: its result
+        must not depend on what the solver did before it (earlier stages, or other jobs on a
+        reused model). A load cut resets only the relaxation: the shift that gave descent
+        steps before the cut is a good start after it (with it reset there too, the 45-degree
+        stiff cylinder of test_stages_contact ends `max-iterations`)."""
+        self.gamma = 1.0
+        self._mu = 0.0
+
+    # -- pieces ---------------------------------------------------------------------------
+
+    def _residual(self, offset: np.ndarray | None) -> tuple[np.ndarray, float]:
+        t0 = time.perf_counter()
+        self.problem.residual(self.rvec)
+        r = self.rvec.getArray(readonly=True).copy()
+        if offset is not None:
+            r -= offset
+        return r, time.perf_counter() - t0
+
+    def _energy(self, offset: np.ndarray | None) -> float | None:
+        """Potential of ``R - offset`` at the current state, or None if there is none."""
+        e = self.problem.energy()
+        if e is None:
+            return None
+        if offset is not None:
+            e -= float(np.dot(offset, self.problem.solution()))
+        return e
+
+    def _factor(self, rows: np.ndarray) -> tuple[float, float]:
+        """Assemble J with identity rows at ``rows`` and factorise: (assembly s, factor s)."""
+        t0 = time.perf_counter()
+        self.problem.jacobian(self.A)
+        self.A.zeroRows(rows, diag=1.0)
+        t1 = time.perf_counter()
+        if not self._factored:
+            self.ksp.setOperators(self.A)
+            pc = self.ksp.getPC()
+            pc.setFactorSetUpSolverType()
+            F = pc.getFactorMatrix()
+            F.setMumpsIcntl(14, 100)  # workspace headroom: fewer -9 failures on 3D meshes
+            self._factored = True
+        self.ksp.setUp()
+        self.ksp.getPC().setUp()  # numeric factorisation now, so it is timed on its own
+        self._factored_rows = rows.copy()
+        return t1 - t0, time.perf_counter() - t1
+
+    def _linear_solve(self, rhs: np.ndarray) -> np.ndarray | None:
+        """Solve with the current factors; None on failure or an inaccurate solution.
+
+        A (near-)singular tangent can factorise without a MUMPS error and give a finite but
+        meaningless answer, so the true residual ||A du - b|| is checked (one product).
+        """
+        self.b.getArray()[:] = rhs
+        self.ksp.solve(self.b, self.dx)
+        if self.ksp.getConvergedReason() < 0:
+            return None
+        du = self.dx.getArray(readonly=True).copy()
+        if not np.all(np.isfinite(du)):
+            return None
+        check = self.b.duplicate()
+        self.A.mult(self.dx, check)
+        err = np.linalg.norm(check.getArray(readonly=True) - rhs)
+        return du if err <= LINEAR_RTOL * max(np.linalg.norm(rhs), 1e-300) else None
+
+    # -- the solve ----------------------------------------------------------------------
+
+    def solve(
+        self,
+        rows: np.ndarray,
+        values: np.ndarray,
+        offset: np.ndarray | None = None,
+        force_scale: float = 0.0,
+        policy: Policy | None = None,
+    ) -> NewtonResult:
+        """Solve R(u) - offset = 0 at the free dofs with u[rows] = values.
+
+        ``policy`` defaults to the solver's settings with the residual rule."""
+        self._policy = policy if policy is not None else Policy(self.settings)
+        st = self._policy.settings
+        u = self.problem.solution()
+        rows = np.asarray(rows, dtype=np.int32)
+        values = np.asarray(values, dtype=float)
+        ell = self.problem.length_scale()
+        free = np.ones(len(u), dtype=bool)
+        free[rows] = False
+        t_asm = t_fac = t_sol = t_res = 0.0
+
+        r, dt = self._residual(offset)
+        t_res += dt
+        last_inc = math.inf
+        min_det = self.problem.min_det(u)
+        res_norm = math.inf
+        scale = force_scale
+        it = 0
+        chord_done = False
+
+        def result(status: str) -> NewtonResult:
+            return NewtonResult(status, it, res_norm, scale, min_det, t_asm, t_fac, t_sol, t_res)
+
+        while True:
+            if not np.all(np.isfinite(r)):
+                return result(DIVERGED)
+            r_free = np.where(free, r, 0.0)
+            res_norm = float(np.linalg.norm(r_free))
+            if not self._policy.fixed_scale:
+                scale = max(scale, float(np.linalg.norm(r)))
+            bc_err = values - u[rows]
+            bc_ok = bool(np.max(np.abs(bc_err), initial=0.0) <= st.stol * ell)
+            res_ok = res_norm <= st.atol + st.rtol * scale
+            _log.debug(
+                "newton it=%d |R|=%.3e scale=%.3e bc=%.2e inc=%.2e gamma=%.3g",
+                it,
+                res_norm,
+                scale,
+                float(np.max(np.abs(bc_err), initial=0.0)),
+                last_inc,
+                self.gamma,
+            )
+            if res_ok and bc_ok and last_inc <= st.stol * ell:
+                # A problem that froze part of its linearisation (the contact pairing) checks
+                # it at the converged state; if a new one moves the forces, iterate on.
+                if self.problem.refresh(st.atol + st.rtol * scale):
+                    r, dt = self._residual(offset)
+                    t_res += dt
+                    last_inc = math.inf
+                    chord_done = False
+                    continue
+                return result(CONVERGED)
+            if res_norm > st.divergence_factor * max(scale, st.atol):
+                return result(DIVERGED)
+            rhs = -r_free
+            rhs[rows] = bc_err
+            same_rows = np.array_equal(rows, self._factored_rows)
+            if res_ok and bc_ok and self._factored and same_rows and not chord_done:
+                # Chord step: the residual is small; measure the increment with the old factors.
+                t0 = time.perf_counter()
+                du = self._linear_solve(rhs)
+                t_sol += time.perf_counter() - t0
+                chord_done = True
+                if du is not None:
+                    u += du
+                    last_inc = float(np.max(np.abs(du), initial=0.0))
+                    min_det = self.problem.min_det(u)
+                    r, dt = self._residual(offset)
+                    t_res += dt
+                    continue
+            if it >= st.max_iterations:
+                return result(MAX_ITERATIONS)
+            it += 1
+            chord_done = False
+            try:
+                ta, tf = self._factor(rows)
+                t_asm += ta
+                t_fac += tf
+                t0 = time.perf_counter()
+                du = self._linear_solve(rhs)
+                t_sol += time.perf_counter() - t0
+            except PETSc.Error:
+                return result(LINEAR_SOLVER_FAILED)
+
+            # Adaptive relaxation: limit the update size, then back off on inversion/growth.
+            u0 = u.copy()
+            prescribing = not bc_ok
+            merit = self._policy.energy_merit and not prescribing
+            e0 = self._energy(offset) if merit else None
+            if du is None and e0 is None:
+                return result(LINEAR_SOLVER_FAILED)
+            limit = st.residual_growth * max(res_norm, st.atol + st.rtol * scale)
+            step: _Step | str = LINEAR_SOLVER_FAILED
+            if du is not None:
+                step = self._relax(u0, du, r_free, free, offset, limit, e0, prescribing)
+            if isinstance(step, str) and e0 is not None:
+                step = self._shifted(u0, rhs, r_free, free, offset, e0)
+                if not isinstance(step, str):
+                    t_fac += step.factor_time_s
+            if isinstance(step, str):
+                u[:] = u0
+                return result(step)
+            t_res += step.residual_time_s
+            r, min_det = step.r, step.min_det
+            last_inc = float(np.max(np.abs(u - u0), initial=0.0))
+            self.gamma = step.gamma if step.shrunk else min(1.0, 2.0 * step.gamma)
+
+    def _relax(
+        self,
+        u0: np.ndarray,
+        du: np.ndarray,
+        r_free: np.ndarray,
+        free: np.ndarray,
+        offset: np.ndarray | None,
+        limit: float,
+        e0: float | None,
+        prescribing: bool,
+    ) -> _Step | str:
+        """Set u = u0 + gamma du for the largest acceptable gamma; else restore u0 and give
+        the failure status.
+
+        With a potential E (``e0`` = E(u0)) and a descent direction (dE = r . du < 0), gamma
+        is accepted by Armijo's rule E(u0 + gamma du) <= E(u0) + 1e-4 gamma dE: E is C1 where
+        R is only C0 (contact activation), so a step across many kinks that raises |R| can
+        still be taken, and a minimiser is reached where a residual rule stalls. Otherwise
+        the residual may grow by at most ``limit`` (no limit while Dirichlet values are
+        still being imposed: the load enters through them).
+        """
+        st = self._policy.settings
+        u = self.problem.solution()
+        strain = self.problem.max_strain(du)
+        gamma = min(self.gamma, st.max_strain_step / strain) if strain > 0 else self.gamma
+        shrunk = gamma < self.gamma
+        slope = float(np.dot(r_free, du))
+        if e0 is not None and not slope < 0.0:
+            return DIVERGED  # uphill: the tangent is indefinite along du (`_shifted`)
+        use_energy = e0 is not None
+        g_min = ENERGY_GAMMA_MIN if use_energy else st.gamma_min
+        # Rounding of the assembled sums: a few ulps of the terms' size.
+        ulps = 64.0 * np.finfo(float).eps * abs(e0 or 0.0)
+        why, t_res = DIVERGED, 0.0
+        while True:
+            u[:] = u0 + gamma * du
+            det = self.problem.min_det(u)
+            if det > 0:
+                e_try = self._energy(offset) if use_energy else None
+                armijo = e0 is None or e_try is None or e_try <= e0 + 1e-4 * gamma * slope + ulps
+                if armijo:
+                    r_try, dt = self._residual(offset)
+                    t_res += dt
+                    n_try = float(np.linalg.norm(np.where(free, r_try, 0.0)))
+                    if np.all(np.isfinite(r_try)) and (prescribing or use_energy or n_try <= limit):
+                        return _Step(gamma, shrunk, r_try, det, t_res, 0.0)
+                why = DIVERGED
+            else:
+                why = INVERTED
+            gamma *= 0.5
+            shrunk = True
+            if gamma < g_min:
+                u[:] = u0
+                return why
+
+    def _shifted(
+        self,
+        u0: np.ndarray,
+        rhs: np.ndarray,
+        r_free: np.ndarray,
+        free: np.ndarray,
+        offset: np.ndarray | None,
+        e0: float,
+    ) -> _Step | str:
+        """Modified Newton when the Newton step is no descent of the potential (the tangent
+        is indefinite: an unstable equilibrium nearby) or finds no acceptable relaxation:
+        solve with the tangent's free diagonal scaled by 1 + mu, mu = 1e-4 ... 1e4 (x10), and
+        take the first step that lowers the potential. A large enough shift makes the matrix
+        positive definite, so the step goes downhill toward a stable equilibrium."""
+        t0 = time.perf_counter()
+        d0 = self.A.getDiagonal()
+        base = d0.getArray(readonly=True).copy()
+        extra = np.where(free, np.abs(base), 0.0)
+        mu = max(1e-4, self._mu / 10.0)
+        try:
+            while mu <= 1e4:
+                d0.getArray()[:] = base + mu * extra
+                self.A.setDiagonal(d0)
+                self.ksp.setUp()
+                self.ksp.getPC().setUp()
+                du = self._linear_solve(rhs)
+                if du is not None:
+                    step = self._relax(u0, du, r_free, free, offset, math.inf, e0, False)
+                    if not isinstance(step, str):  # a descent step, accepted by Armijo
+                        self._mu = mu
+                        _log.debug("newton: shifted tangent, mu=%.1e", mu)
+                        return step._replace(factor_time_s=time.perf_counter() - t0)
+                    self.problem.solution()[:] = u0
+                mu *= 10.0
+        except PETSc.Error:
+            return LINEAR_SOLVER_FAILED
+        finally:
+            # The factors are of a shifted matrix: no chord step may reuse them.
+            self._factored_rows = np.zeros(0, dtype=np.int32)
+        return DIVERGED

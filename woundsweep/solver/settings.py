@@ -1,0 +1,56 @@
+"""Newton's numerical settings: the sweep's ``solver`` section (pure Python, no PETSc)."""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping
+from typing import Any
+
+__all__ = ["NewtonSettings"]
+
+
+@dataclasses.dataclass(frozen=True)
+class NewtonSettings:
+    """Numerical settings (sweep section ``solver``; its other keys are the model's)."""
+
+    max_iterations: int = 60  # Newton steps per load increment
+    max_stage_iterations: int = 1000  # Newton steps per stage (all increments): bounds the cost
+    rtol: float = 1e-8  # residual, relative to the force scale
+    atol: float = 1e-10  # residual floor, mN
+    stol: float = 1e-8  # increment and Dirichlet mismatch, relative to the length scale
+    load_steps: int = 1  # first load increment = 1 / load_steps of the stage's change
+    max_load_cuts: int = 6  # consecutive halvings of the load increment before giving up
+    max_strain_step: float = 0.5  # largest |grad du| (Frobenius, per cell) of one update
+    gamma_min: float = 1.0 / 64.0  # smallest relaxation factor tried
+    residual_growth: float = 4.0  # accept an update while ||R|| grows by at most this factor
+    divergence_factor: float = 1e6  # ||R|| above this times the force scale: diverged
+    # The contact stages' residual is only piecewise smooth (a contact point that changes its
+    # master facet turns its force by the facets' angle), and Newton cannot resolve it below
+    # the size of those jumps: their residual tolerance is looser. Abaqus' default force
+    # tolerance, for comparison, is 5e-3 of the average force.
+    contact_rtol: float = 1e-4
+    # Frictionless sliding leaves the flanks' tangential position nearly free, so the contact
+    # stages' increment tolerance is looser too.
+    contact_residual_growth: float = 1.0
+    contact_stol: float = 1e-5
+
+    @classmethod
+    def from_mapping(cls, values: Mapping[str, Any] | None) -> NewtonSettings:
+        """Settings from a sweep's ``solver`` mapping; missing keys keep their defaults."""
+        if not values:
+            return cls()
+        kwargs = {}
+        for f in dataclasses.fields(cls):
+            if f.name in values:
+                cast = {"int": int, "bool": bool}.get(str(f.type), float)
+                kwargs[f.name] = cast(values[f.name])
+        return cls(**kwargs)
+
+    def for_contact(self) -> NewtonSettings:
+        """The contact stages' settings: the looser contact tolerances and residual rule."""
+        return dataclasses.replace(
+            self,
+            rtol=max(self.rtol, self.contact_rtol),
+            stol=max(self.stol, self.contact_stol),
+            residual_growth=self.contact_residual_growth,
+        )

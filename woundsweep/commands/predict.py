@@ -25,7 +25,12 @@ _NUMERIC_PARAMS = (
         "Cylindrical only: axis offset / width.",
     ),
     ("--mesh-size-factor", "mesh_size_factor", True, "Mesh size factor (larger = finer)."),
-    ("--orientation", "orientation_deg", True, "Wound axis vs stiff material axis (deg)."),
+    (
+        "--orientation",
+        "orientation_deg",
+        True,
+        "Stiff axis angle to x, 0 = across the wound (deg).",
+    ),
 )
 
 

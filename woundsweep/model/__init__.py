@@ -23,7 +23,7 @@ __all__ = [
 ]
 
 _LAZY = {
-    "ClosureZone": "domain",
+    "ClosureZone": "parameters",
     "WoundDomain": "domain",
     "Fung": "materials",
     "JobMaterials": "materials",

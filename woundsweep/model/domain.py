@@ -9,8 +9,6 @@ indices (dof ``3 i + c`` is component c of node i); ``input_node`` maps input po
 
 from __future__ import annotations
 
-import dataclasses
-from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -18,36 +16,19 @@ import numpy as np
 from .. import compat
 from ..contact.geometry import owning_cells
 from ..schema import BOTTOM, DERMIS, SUBCUTIS, WOUND, X_MAX, X_MIN, Y_MAX, Y_MIN
+from .parameters import ClosureZone
 
 __all__ = [
     "LATERAL_DERMIS",
     "LATERAL_SUBCUTIS",
     "ZONE_LEFT",
     "ZONE_RIGHT",
-    "ClosureZone",
     "WoundDomain",
     "dof_rows",
 ]
 
 # Facet ids the solver derives for its integrals (not part of the mesh contract).
 LATERAL_DERMIS, LATERAL_SUBCUTIS, ZONE_LEFT, ZONE_RIGHT = 101, 102, 103, 104
-
-
-@dataclasses.dataclass(frozen=True)
-class ClosureZone:
-    """Where primary intention acts: the middle ``y_fraction`` of the wound length (|y - y_c| <=
-    y_fraction * L_y, L_y the patch half-length) and the upper ``depth_fraction`` of its depth."""
-
-    y_fraction: float = 1.0 / 3.0
-    depth_fraction: float = 0.5
-
-    @classmethod
-    def from_sweep(cls, stages: Mapping[str, Any] | None) -> ClosureZone:
-        zone = (stages or {}).get("closure_zone", {})
-        return cls(
-            float(zone.get("y_fraction", cls.y_fraction)),
-            float(zone.get("depth_fraction", cls.depth_fraction)),
-        )
 
 
 def dof_rows(nodes: Any, comp: int) -> np.ndarray:

@@ -211,8 +211,8 @@ def solve_job(
     from ..mesh.cache import get_mesh
     from ..mesh.spec import GeometrySpec
     from ..sweep.grid import load_run
-    from .domain import ClosureZone
     from .materials import JobMaterials
+    from .parameters import ClosureZone
     from .stages import WoundModel
 
     run = load_run(run_dir)

@@ -29,17 +29,15 @@ from ..schema import DERMIS, STAGES, SUBCUTIS, StageStatus
 from ..solver.continuation import ContinuationResult, LoadState, continuation
 from ..solver.newton import NewtonSolver, Policy
 from ..solver.settings import NewtonSettings
-from .domain import ClosureZone, WoundDomain, dof_rows
+from .domain import WoundDomain, dof_rows
 from .forms import WoundForms
 from .materials import HomogeneousState, JobMaterials, homogeneous_state
+from .parameters import CLOSURE_LOADS, CONTACT_PENALTY_GPA, ClosureZone
 from .problem import WoundProblem
 from .stability import lowest_eigenvalues
 
-__all__ = ["CLOSURE_LOADS", "CONTACT_START_kPa", "StageOutcome", "WoundModel"]
+__all__ = ["CONTACT_START_kPa", "StageOutcome", "WoundModel"]
 
-# The closure traction in stages 4-6: a dead load on the stage-2 area, or a follower load on
-# the current one (each load increment's state, updated at convergence until it holds).
-CLOSURE_LOADS = ("dead", "follower")
 CONTACT_START_kPa = 100.0  # stage 4's penalty ramp starts here: a soft-tissue modulus
 
 
@@ -67,8 +65,8 @@ class WoundModel:
         zone: ClosureZone | None = None,
         settings: NewtonSettings | None = None,
         jit: dict[str, Any] | None = None,
-        contact_penalty_GPa: tuple[float, float, float] = (1.0, 5.0, 100.0),
-        closure_load: str = "dead",
+        contact_penalty_GPa: tuple[float, float, float] = CONTACT_PENALTY_GPA,
+        closure_load: str = CLOSURE_LOADS[0],
     ) -> None:
         if closure_load not in CLOSURE_LOADS:
             raise ValueError(f"closure_load must be one of {CLOSURE_LOADS}, not {closure_load!r}")

@@ -23,8 +23,9 @@ import numpy as np
 import pandas as pd
 import yaml
 
+from ..analysis.settings import ModelSettings
 from ..errors import StoreError, SweepError
-from ..model.parameters import TABLE2
+from ..model.parameters import CLOSURE_LOADS, STAGE_SETTINGS, TABLE2
 from ..solver.settings import NewtonSettings
 from .rules import compile_rule, evaluate_rule
 
@@ -83,39 +84,20 @@ MANIFEST_COLUMNS = (
 _RULE_NAMES = frozenset(MANIFEST_COLUMNS) - {"job_index", "job_id", "geometry_id"}
 
 # The paper's settings: Table 2 (`woundsweep.model.parameters`), the stage settings of its
-# Methods, and the Newton defaults (`woundsweep.solver.settings.NewtonSettings`).
+# Methods, the Newton defaults (`woundsweep.solver.settings.NewtonSettings`) and the stress
+# model's (`woundsweep.analysis.settings.ModelSettings`).
 DEFAULTS: dict[str, Any] = {
     "materials": copy.deepcopy(TABLE2),
-    "stages": {
-        "closure_zone": {"y_fraction": 1.0 / 3.0, "depth_fraction": 0.5},
-        "contact_penalty_GPa": [1.0, 5.0, 100.0],
-        # The contact model of stages 4-6: "surface" (`woundsweep.contact`) is the only one.
-        "contact_model": "surface",
-        # Closure traction of stages 4-6: "dead" (stage-2 area) or "follower".
-        "closure_load": "dead",
-    },
+    "stages": copy.deepcopy(STAGE_SETTINGS),
     # Numerics: quadrature degree and `NewtonSettings` (which documents each key).
     "solver": {"quadrature_degree": 1, **dataclasses.asdict(NewtonSettings())},
-    "analysis": {
-        "quantiles": 8,
-        "max_depth": 6,
-        "n_estimators": 150,
-        "learning_rate": 0.1,
-        "early_stopping_rounds": 20,
-        "seed": 0,
-        "nthread": 2,
-        "train_fraction": 0.63,
-        "validation_fraction": 0.27,
-        "min_child_weight": 1.0,
-        "subsample": 1.0,
-        "colsample_bytree": 1.0,
-        "reg_lambda": 1.0,
-    },
+    # The stress model (`woundsweep.analysis.settings.ModelSettings` documents each key).
+    "analysis": dataclasses.asdict(ModelSettings()),
 }
 SETTINGS = tuple(DEFAULTS)
 CHOICES = {
     "stages.contact_model": ("surface",),
-    "stages.closure_load": ("dead", "follower"),
+    "stages.closure_load": CLOSURE_LOADS,
 }  # the string-valued settings
 # String-setting values refused with a message of their own.
 REMOVED_CHOICES = {

@@ -8,6 +8,7 @@ from typing import Any
 
 import click
 
+from ..schema import FailureClass
 from ..sweep.grid import load_run
 from ..sweep.results import read_results, summarize
 
@@ -35,7 +36,7 @@ def format_status(s: dict[str, Any]) -> str:
     lines.append("by failure class:")
     for cls, n in s["by_failure_class"].items():
         extra = ""
-        if cls == "not-converged" and s["not_converged_at_stage"]:
+        if cls == FailureClass.NOT_CONVERGED and s["not_converged_at_stage"]:
             extra = (
                 "  (at stage "
                 + ", ".join(f"{k}: {v}" for k, v in s["not_converged_at_stage"].items())

@@ -10,7 +10,6 @@ import sys
 from pathlib import Path
 
 import pytest
-import yaml
 
 PACKAGE = Path(__file__).resolve().parent.parent / "woundsweep"
 MAX_LINES = 500
@@ -82,21 +81,7 @@ def test_modules_are_small() -> None:
 
 def test_commands_without_the_solver_do_not_import_it(tmp_path: Path) -> None:
     """`--help`, `generate` and `status` load neither DOLFINx nor gmsh, XGBoost or matplotlib."""
-    sweep = {
-        "name": "layout",
-        "grid": {
-            "dermal_thickness_mm": [1],
-            "subcutis_thickness_factor": [1],
-            "patch_size_factor": [2],
-            "wound_width_factor": [0.3],
-            "mesh_size_factor": [0.3],
-            "skin_type": ["soft"],
-            "orientation_deg": [0],
-        },
-        "shapes": {"wedge": {"wound_depth_factor": [0.5]}},
-    }
-    path = tmp_path / "sweep.yaml"
-    path.write_text(yaml.safe_dump(sweep))
+    path = PACKAGE.parent / "sweeps" / "demo.yaml"
     run = tmp_path / "run"
     code = (
         "import json, sys\n"

@@ -26,8 +26,8 @@ from woundsweep.faults import FaultSpec, parse_faults
 from woundsweep.sweep.classify import stability_note
 from woundsweep.sweep.grid import load_run
 from woundsweep.sweep.jitlock import JIT_TIMEOUT_RE, clear_stale_jit_locks, lock_state
+from woundsweep.sweep.results import read_results
 from woundsweep.sweep.shards import partition
-from woundsweep.sweep.store import read_results
 
 WS = [sys.executable, "-m", "woundsweep"]
 needs_solve = pytest.mark.skipif(

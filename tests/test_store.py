@@ -26,9 +26,9 @@ from woundsweep.errors import StoreError
 from woundsweep.schema import FailureClass, StageResult
 from woundsweep.solverfile import read_solver_file
 from woundsweep.sweep.grid import load_run
-from woundsweep.sweep.results import STAGE_FIELDS
+from woundsweep.sweep.results import STAGE_FIELDS, read_results, summarize
 from woundsweep.sweep.shards import estimate_cost
-from woundsweep.sweep.store import JobOutcome, Store, read_results, summarize
+from woundsweep.sweep.store import JobOutcome, Store
 
 ROOT = Path(__file__).resolve().parent.parent
 WS = [sys.executable, "-m", "woundsweep"]

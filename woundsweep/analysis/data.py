@@ -15,7 +15,7 @@ import pandas as pd
 
 from ..errors import AnalysisError
 from ..schema import StageStatus
-from ..sweep.store import read_results
+from ..sweep.results import read_results
 from .settings import FEATURES, REQUIRED_COLUMNS, SHAPE_CODES, STRESS
 
 __all__ = [

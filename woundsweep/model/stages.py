@@ -73,7 +73,6 @@ class WoundModel:
         if len(contact_penalty_GPa) != 3:
             raise ValueError("contact_penalty_GPa needs three values (stages 4, 5, 6)")
         self.contact_penalty_kPa = tuple(float(k) * GPA_TO_KPA for k in contact_penalty_GPa)
-        self.settings = settings or NewtonSettings()
         self.domain = d = WoundDomain(mesh_data, zone)
         self.contact: ContactModel | None = None
         if d.has_wound:
@@ -82,15 +81,24 @@ class WoundModel:
             # wound; the wound's depth bounds any overlap that closure can produce.
             self.contact = FlankContact(d.X, left, right, max_depth_mm=d.wound_depth)
         self.forms = WoundForms(d, quadrature_degree, jit)
-        self.jit_time_s = self.forms.jit_time_s
         self.problem = WoundProblem(d, self.forms, self.contact, closure_load == "follower")
-        self.newton = NewtonSolver(self.problem, self.problem.A, self.settings)
+        self.newton = NewtonSolver(self.problem, self.problem.A, settings or NewtonSettings())
         self.materials: JobMaterials | None = None
         self.homogeneous: dict[int, HomogeneousState] = {}
         self.results: dict[int, StageOutcome] = {}
         self.displacements: dict[int, np.ndarray] = {}
         self.tau_kPa = 0.0
         self.closure_force_mN: tuple[float, float] = (0.0, 0.0)
+
+    @property
+    def settings(self) -> NewtonSettings:
+        """Newton's settings (the contact stages derive theirs with `for_contact`)."""
+        return self.newton.settings
+
+    @property
+    def jit_time_s(self) -> float:
+        """How long compiling (or loading) the forms took, s."""
+        return self.forms.jit_time_s
 
     @property
     def u(self) -> np.ndarray:
@@ -258,7 +266,7 @@ class WoundModel:
         k_from, k_to, load, scale = self._contact_load(stage, rows)
         # The residual of a penetrating start holds penalty forces far above the physical
         # ones: they must not set the convergence tolerance (a fixed force scale).
-        policy = Policy(self.newton.settings.for_contact(), energy_merit=True, fixed_scale=True)
+        policy = Policy(self.settings.for_contact(), energy_merit=True, fixed_scale=True)
         try:
             decades = np.log10(k_to / k_from)
             res = continuation(

@@ -13,13 +13,9 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..schema import StageStatus
-from .newton import NewtonResult, NewtonSolver, Policy
+from .newton import CONVERGED, MAX_ITERATIONS, NewtonResult, NewtonSolver, Policy
 
 __all__ = ["ContinuationResult", "LoadState", "continuation"]
-
-CONVERGED = StageStatus.CONVERGED
-MAX_ITERATIONS = StageStatus.MAX_ITERATIONS
 
 
 class LoadState(NamedTuple):

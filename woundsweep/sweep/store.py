@@ -50,9 +50,7 @@ from .results import (
     META_KEY,
     STAGE_FIELDS,
     content_digest,
-    read_results,
     result_schema,
-    summarize,
     validate_result_file,
 )
 
@@ -61,8 +59,6 @@ __all__ = [
     "JobOutcome",
     "JobState",
     "Store",
-    "read_results",
-    "summarize",
 ]
 
 FIELDS_CHOICES = ("all", "final", "none")

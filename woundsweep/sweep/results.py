@@ -2,19 +2,22 @@
 
 Every result file has the schema `result_schema` (fixed, so the files always form one
 dataset): the manifest columns, ``stage``, ``status``, the failure columns, the `StageResult`
-fields (`STAGE_FIELDS`) and the job's bookkeeping. Its footer record (key ``woundsweep``)
-holds the job id, the stages, the failure class, the fields file and its size, and a sha256
-of the rows' values, since page CRCs miss some damage (e.g. in page headers).
-`read_results` checks all of it for every file it reads.
+fields (`STAGE_FIELDS`) and the job's bookkeeping, including its `identity` fingerprint and
+the checksums of its fields and mesh files. Its footer record (key ``woundsweep``) holds the
+format version, the job id, the stages, the failure class, the fingerprint, the fields file
+with its size and sha256, the mesh file's sha256, and a sha256 of the rows' values, since page
+CRCs miss some damage (e.g. in page headers). `check_result` sorts a stored file into done,
+stale, corrupt or damaged; `read_results` returns the current rows of a run.
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
-from collections.abc import Iterable
+import re
+from collections.abc import Iterable, Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import pandas as pd
 import pyarrow as pa
@@ -22,16 +25,25 @@ import pyarrow.parquet as pq
 
 from ..errors import StoreError
 from ..schema import FailureClass, StageStatus, stage_field_kinds
-from .grid import MANIFEST_COLUMNS
+from .grid import MANIFEST_COLUMNS, load_run
+from .identity import FORMAT_VERSION, file_sha256, fingerprints
 from .shards import estimate_cost
 
 __all__ = [
     "FORMAT_VERSION",
     "META_KEY",
+    "RESULT_NAME",
     "STAGE_FIELDS",
+    "FilesDamaged",
+    "ResultCheck",
+    "StoreScan",
+    "check_result",
     "content_digest",
     "read_results",
+    "result_files",
     "result_schema",
+    "scan_results",
+    "scan_store",
     "summarize",
     "validate_result_file",
 ]
@@ -62,9 +74,17 @@ _JOB_FIELDS: dict[str, pa.DataType] = {
     "dolfinx_version": pa.string(),
     "python_version": pa.string(),
     "jit_time_s": pa.float64(),  # the solver's form-compile (or cache load) time, if it says
+    "result_fingerprint": pa.string(),  # `identity.result_fingerprint` of the job's inputs
+    "fields_file_sha256": pa.string(),
+    "mesh_file_sha256": pa.string(),
 }
 META_KEY = b"woundsweep"
-FORMAT_VERSION = 1
+# The names the store gives its result files; anything else in results/ is not the store's.
+RESULT_NAME = re.compile(r"job-([0-9a-f]{16})\.parquet")
+
+
+class FilesDamaged(StoreError):
+    """A result whose fields or mesh file is missing or differs from its recorded checksum."""
 
 
 def content_digest(table: pa.Table) -> str:
@@ -95,9 +115,28 @@ def result_schema() -> pa.Schema:
     return pa.schema(fields)
 
 
-def validate_result_file(path: Path, job_id: str | None, run_dir: Path) -> dict[str, Any]:
+def _footer(path: Path) -> dict[str, Any] | None:
+    """The footer record alone (cheap: the Parquet footer), or None if it cannot be read."""
+    try:
+        raw = (pq.read_schema(path).metadata or {}).get(META_KEY)
+        meta = json.loads(raw)
+    except Exception:  # noqa: BLE001 - damaged files are the full validator's to name
+        return None
+    return meta if isinstance(meta, dict) else None
+
+
+def validate_result_file(
+    path: Path,
+    job_id: str | None,
+    run_dir: Path,
+    *,
+    verify_files: bool = False,
+    memo: dict | None = None,
+) -> dict[str, Any]:
     """Read a whole result file with page checksums; returns its footer record.
 
+    Raises `StoreError` for a damaged Parquet file and `FilesDamaged` when its fields or mesh
+    file is missing, has another size, or (``verify_files``) another sha256 than recorded.
     The record's ``_table`` holds the file's table.
     """
     try:
@@ -126,43 +165,156 @@ def validate_result_file(path: Path, job_id: str | None, run_dir: Path) -> dict[
     ff = meta.get("fields_file") or ""
     if ff:
         fpath = run_dir / "fields" / ff
-        if not fpath.exists() or fpath.stat().st_size != meta.get("fields_bytes"):
-            raise StoreError(f"{path}: its fields file {fpath} is missing or truncated")
+        if not fpath.is_file() or fpath.stat().st_size != meta.get("fields_bytes"):
+            raise FilesDamaged(f"{path}: its fields file {fpath} is missing or truncated")
+        if verify_files and file_sha256(fpath, memo) != meta.get("fields_sha256"):
+            raise FilesDamaged(f"{path}: its fields file {fpath} is damaged (sha256 differs)")
     mf = meta.get("mesh_file") or ""
-    if mf and not (run_dir / "fields" / mf).exists():
-        raise StoreError(f"{path}: its mesh file fields/{mf} is missing")
+    if mf:
+        mpath = run_dir / "fields" / mf
+        if not mpath.is_file():
+            raise FilesDamaged(f"{path}: its mesh file {mpath} is missing")
+        if verify_files and file_sha256(mpath, memo) != meta.get("mesh_sha256"):
+            raise FilesDamaged(f"{path}: its mesh file {mpath} is damaged (sha256 differs)")
     meta["_table"] = table
     return meta
 
 
+class ResultCheck(NamedTuple):
+    """One stored result: ``state`` is ``done``, ``stale``, ``corrupt`` or ``damaged``."""
+
+    state: str
+    reason: str = ""
+    meta: dict[str, Any] | None = None
+
+
+def check_result(
+    path: Path,
+    job_id: str,
+    run_dir: Path,
+    fingerprint: str | None,
+    *,
+    verify_files: bool = True,
+    memo: dict | None = None,
+) -> ResultCheck:
+    """Sort one result file: corrupt (the Parquet file), stale (another result format or
+    another fingerprint than ``fingerprint``), damaged (its fields or mesh file), or done."""
+    footer = _footer(path)
+    if footer is not None and footer.get("format") != FORMAT_VERSION:
+        return ResultCheck("stale", f"written in result format {footer.get('format')!r}")
+    try:
+        meta = validate_result_file(path, job_id, run_dir, verify_files=False)
+    except StoreError as err:
+        return ResultCheck("corrupt", str(err))
+    if fingerprint is not None and meta.get("fingerprint") != fingerprint:
+        return ResultCheck("stale", "computed with other settings (fingerprint differs)", meta)
+    if verify_files:
+        try:
+            validate_result_file(path, job_id, run_dir, verify_files=True, memo=memo)
+        except FilesDamaged as err:
+            return ResultCheck("damaged", str(err), meta)
+    return ResultCheck("done", "", meta)
+
+
+def result_files(run_dir: Path) -> tuple[dict[str, Path], list[Path]]:
+    """The store's result files by job id, and the stray files of ``results/`` (ignored)."""
+    results_dir = run_dir / "results"
+    found: dict[str, Path] = {}
+    stray: list[Path] = []
+    if results_dir.is_dir():
+        for p in sorted(results_dir.iterdir()):
+            m = RESULT_NAME.fullmatch(p.name)
+            if m and p.is_file():
+                found[m.group(1)] = p
+            elif not p.name.startswith("."):  # dot files are writers' temporaries
+                stray.append(p)
+    return found, stray
+
+
+_BAD = ("corrupt", "damaged")
+
+
+class StoreScan(NamedTuple):
+    """What `scan_store` found: checks of manifest jobs, orphans, stray files."""
+
+    checks: dict[str, ResultCheck]
+    orphans: list[str]
+    stray: list[Path]
+
+    def count(self, state: str) -> int:
+        return sum(c.state == state for c in self.checks.values())
+
+
+def scan_store(run_dir: str | Path, *, verify_files: bool = True) -> StoreScan:
+    """Check every result file of the run's manifest jobs (checksums of the fields and mesh
+    files too, unless ``verify_files`` is false); moves nothing."""
+    rd = Path(run_dir)
+    run = load_run(rd)
+    expected = fingerprints(run.sweep, run.manifest)
+    files, stray = result_files(rd)
+    memo: dict = {}
+    checks = {
+        jid: check_result(p, jid, rd, expected[jid], verify_files=verify_files, memo=memo)
+        for jid, p in files.items()
+        if jid in expected
+    }
+    orphans = [jid for jid in files if jid not in expected]
+    return StoreScan(checks, orphans, stray)
+
+
+def _frame(tables: list[pa.Table]) -> pd.DataFrame:
+    if not tables:
+        return result_schema().empty_table().to_pandas()
+    return pa.concat_tables([t.replace_schema_metadata(None) for t in tables]).to_pandas()
+
+
 def read_results(run_dir: str | Path, job_ids: Iterable[str] | None = None) -> pd.DataFrame:
-    """All result rows of a run, one per job and stage (empty frame with the columns if none).
+    """The current result rows of a run, one per job and stage (an empty frame if none).
 
     Every file is validated (page checksums, footer record, schema, fields file size); a bad
-    one raises ``StoreError`` naming it, on one line, with the fix.
+    one raises ``StoreError`` naming it, on one line, with the fix. Results of manifest jobs
+    computed with other settings (stale) are left out; so are stray files in ``results/``.
+    Jobs not in the manifest (orphans of an earlier sweep) are returned: callers filter them.
     """
     run_dir = Path(run_dir)
-    results_dir = run_dir / "results"
-    files = sorted(results_dir.glob("job-*.parquet")) if results_dir.is_dir() else []
+    files, _ = result_files(run_dir)
+    expected: Mapping[str, str] = {}
+    if (run_dir / "manifest.parquet").is_file() and (run_dir / "sweep.yaml").is_file():
+        run = load_run(run_dir)
+        expected = fingerprints(run.sweep, run.manifest)
     if job_ids is not None:
         wanted = set(job_ids)
-        files = [p for p in files if p.name[4:-8] in wanted]
+        files = {j: p for j, p in files.items() if j in wanted}
     tables = []
-    for p in files:
+    for jid, p in files.items():
+        footer = _footer(p)
+        if footer is not None and footer.get("format") != FORMAT_VERSION:
+            continue  # another result format: stale (or an orphan that cannot be read)
         try:
-            meta = validate_result_file(p, p.name[4:-8], run_dir)
+            meta = validate_result_file(p, jid, run_dir)
         except StoreError as err:
             raise StoreError(
                 f"{err}; rerun `woundsweep run {run_dir}` (it moves the file aside and redoes the job)"
             ) from None
-        tables.append(meta["_table"].replace_schema_metadata(None))
-    if not tables:
-        return result_schema().empty_table().to_pandas()
-    return pa.concat_tables(tables).to_pandas()
+        if jid in expected and meta.get("fingerprint") != expected[jid]:
+            continue
+        tables.append(meta["_table"])
+    return _frame(tables)
 
 
-def summarize(manifest: pd.DataFrame, results: pd.DataFrame) -> dict[str, Any]:
-    """Counts and times for ``woundsweep status`` (jobs of the manifest only)."""
+def scan_results(scan: StoreScan) -> pd.DataFrame:
+    """The rows of the results a scan found done (what `woundsweep status` counts)."""
+    return _frame([c.meta["_table"] for c in scan.checks.values() if c.state == "done" and c.meta])
+
+
+def summarize(
+    manifest: pd.DataFrame, results: pd.DataFrame, scan: StoreScan | None = None
+) -> dict[str, Any]:
+    """Counts and times for ``woundsweep status`` (jobs of the manifest only).
+
+    With a ``scan``, also the stale and damaged results (pending: `run` redoes them), the
+    orphans and the stray files it found.
+    """
     in_manifest = results["job_id"].isin(set(manifest["job_id"]))
     orphans = int(results.loc[~in_manifest, "job_id"].nunique())
     rows = results[in_manifest]
@@ -195,7 +347,13 @@ def summarize(manifest: pd.DataFrame, results: pd.DataFrame) -> dict[str, Any]:
         "jobs_done": int(len(jobs)),
         "jobs_pending": int(len(pending)),
         "rows": int(len(rows)),
-        "orphan_jobs": orphans,
+        "orphan_jobs": orphans if scan is None else len(scan.orphans),
+        "jobs_stale": 0 if scan is None else scan.count("stale"),
+        "jobs_damaged": 0 if scan is None else scan.count("corrupt") + scan.count("damaged"),
+        "damaged_example": next(
+            (c.reason for c in (scan.checks.values() if scan else ()) if c.state in _BAD), None
+        ),
+        "stray_files": 0 if scan is None else len(scan.stray),
         "by_failure_class": by_class,
         "not_converged_at_stage": not_converged_at,
         "by_stage": by_stage,

@@ -284,16 +284,17 @@ def run_shard(run_dir: str | Path, opts: RunOptions) -> RunSummary:
     t0 = time.time()
     run = load_run(run_dir)
     run_dir = run.run_dir
-    store = Store(run_dir)
+    store = Store(run_dir, run.sweep)
     store.ensure_dirs()
     store.clean_tmp()
     clear_stale_jit_locks(jit_cache_dir(), opts.jit_stale_after_s)
     shard = shard_jobs(run.manifest, opts.shard)
     todo, skipped = [], 0
     for row in _order(shard, opts.warmup):
-        st = store.job_state(str(row["job_id"]), opts.stages)
-        if st.state == "corrupt":
-            moved = store.quarantine(str(row["job_id"]))
+        jid = str(row["job_id"])
+        st = store.job_state(jid, opts.stages, store.fingerprint(row))
+        if st.state in ("corrupt", "damaged"):  # damaged: its fields or mesh file go too
+            moved = store.quarantine(jid, files=st.state == "damaged")
             print(f"woundsweep run: {st.reason}; moved to {moved}, rerunning", file=sys.stderr)
         elif st.state == "done" and not (
             opts.rerun_failed and st.failure_class != FailureClass.CONVERGED

@@ -19,8 +19,11 @@ the whole store. Failed jobs get rows too (status ``not-run`` for stages without
 so counts by ``failure_class`` come straight from the store.
 
 Parquet files carry page checksums and a footer record that resume validation checks
-(`woundsweep.sweep.results`, which also holds `read_results`, the validated reader); HDF5
-datasets are float32 (coordinates float64), gzip-compressed with Fletcher-32 checksums.
+(`woundsweep.sweep.results`, which also holds `read_results`, the validated reader): the
+result's fingerprint (`woundsweep.sweep.identity`; another one means stale: redone) and the
+sha256 of its fields and mesh files (another one means damaged: the files go to corrupt/ and
+the job is redone). HDF5 datasets are float32 (coordinates float64), gzip-compressed with
+Fletcher-32 checksums.
 """
 
 from __future__ import annotations
@@ -44,15 +47,9 @@ from ..errors import StoreError
 from ..fsutil import atomic_write
 from ..schema import FailureClass, StageStatus
 from ..solverfile import MESH_DATASETS, MESH_GROUP, SolverOutput, stage_group, stage_of_group
-from .grid import MANIFEST_COLUMNS
-from .results import (
-    FORMAT_VERSION,
-    META_KEY,
-    STAGE_FIELDS,
-    content_digest,
-    result_schema,
-    validate_result_file,
-)
+from .grid import MANIFEST_COLUMNS, Sweep, load_run, load_sweep
+from .identity import FORMAT_VERSION, file_sha256, fingerprints, result_fingerprint
+from .results import META_KEY, STAGE_FIELDS, check_result, content_digest, result_schema
 
 __all__ = [
     "FIELDS_CHOICES",
@@ -82,7 +79,9 @@ class JobOutcome(NamedTuple):
 
 
 class JobState(NamedTuple):
-    """Resume bookkeeping for one job: ``state`` is ``missing``, ``done``, ``stale`` or ``corrupt``."""
+    """Resume bookkeeping for one job: ``state`` is ``missing``, ``done``, ``stale`` (other
+    stages or other settings), ``corrupt`` (the Parquet file) or ``damaged`` (its fields or
+    mesh file)."""
 
     state: str
     failure_class: str | None = None
@@ -128,8 +127,11 @@ def _mesh_digest(mesh: Any) -> str:
 class Store:
     """Paths, atomic writes and resume validation for one run directory."""
 
-    def __init__(self, run_dir: str | Path) -> None:
+    def __init__(self, run_dir: str | Path, sweep: Sweep | None = None) -> None:
         self.run_dir = Path(run_dir)
+        self._sweep = sweep
+        self._expected: dict[str, str] | None = None
+        self._memo: dict = {}
         self.results_dir = self.run_dir / "results"
         self.fields_dir = self.run_dir / "fields"
         self.logs_dir = self.run_dir / "logs"
@@ -151,26 +153,58 @@ class Store:
         """A per-attempt temporary file named after this host and runner pid (see clean_tmp)."""
         return self.tmp_dir / f"{job_id}~{self.host}~{os.getpid()}~{attempt}{suffix}"
 
+    @property
+    def sweep(self) -> Sweep:
+        """The run's sweep (its settings make the results' fingerprints)."""
+        if self._sweep is None:
+            self._sweep = load_sweep(self.run_dir / "sweep.yaml")
+        return self._sweep
+
+    def fingerprint(self, job: dict[str, Any]) -> str:
+        return result_fingerprint(self.sweep, job)
+
     # ---- resume bookkeeping -------------------------------------------------------------
-    def job_state(self, job_id: str, stages: tuple[int, int]) -> JobState:
-        """Is the job's result present, valid, and does it cover ``stages``?"""
+    def job_state(
+        self, job_id: str, stages: tuple[int, int], fingerprint: str | None = None
+    ) -> JobState:
+        """Is the job's result present, valid, current, with intact files, covering ``stages``?
+
+        ``fingerprint`` defaults to the one the run's manifest and sweep give the job.
+        """
         path = self.result_path(job_id)
         if not path.exists():
             return JobState("missing")
-        try:
-            meta = validate_result_file(path, job_id, self.run_dir)
-        except StoreError as err:
-            return JobState("corrupt", reason=str(err))
+        if fingerprint is None:
+            if self._expected is None:
+                run = load_run(self.run_dir)
+                self._expected = fingerprints(run.sweep, run.manifest)
+            fingerprint = self._expected.get(job_id)
+        chk = check_result(path, job_id, self.run_dir, fingerprint, memo=self._memo)
+        meta = chk.meta or {}
+        if chk.state != "done":
+            return JobState(chk.state, meta.get("failure_class"), chk.reason)
         lo, hi = meta["stages"]
         if lo > stages[0] or hi < stages[1]:
             return JobState("stale", meta["failure_class"], f"has stages {lo}-{hi}")
         return JobState("done", meta["failure_class"])
 
-    def quarantine(self, job_id: str) -> Path | None:
-        """Move a result file that failed validation to RUN_DIR/corrupt/ (kept for inspection)."""
+    def quarantine(self, job_id: str, files: bool = False) -> Path | None:
+        """Move a result file that failed validation to RUN_DIR/corrupt/ (kept for inspection).
+
+        With ``files`` its fields file and a mesh file whose checksum differs go there too.
+        """
         src = self.result_path(job_id)
         self.corrupt_dir.mkdir(parents=True, exist_ok=True)
-        dst = self.corrupt_dir / f"{src.name}.{int(time.time())}"
+        stamp = int(time.time())
+        if files:
+            meta = _footer_of(src)
+            for name, key in (("fields_file", "fields_sha256"), ("mesh_file", "mesh_sha256")):
+                f = self.fields_dir / str(meta.get(name) or "")
+                if meta.get(name) and f.is_file():
+                    if name == "mesh_file" and file_sha256(f) == meta.get(key):
+                        continue  # the geometry's mesh is intact: other jobs use it
+                    os.replace(f, self.corrupt_dir / f"{f.name}.{stamp}")
+        dst = self.corrupt_dir / f"{src.name}.{stamp}"
         try:
             os.replace(src, dst)
         except FileNotFoundError:
@@ -216,7 +250,10 @@ class Store:
     def _write_fields(
         self, out: SolverOutput, job_id: str, geometry_id: str, fields: str
     ) -> tuple[str, int, str]:
-        """Write the job's HDF5 fields (and the geometry's mesh once); returns names and size."""
+        """Write the job's HDF5 fields (and the geometry's mesh once); returns names and size.
+
+        A mesh file that does not open is replaced (its jobs' checksums then differ: redone).
+        """
         import h5py
 
         groups = (stage_of_group(g) for g in out.attrs["_groups"])
@@ -261,6 +298,9 @@ class Store:
             path = self.fields_dir / f"{job_id}.h5"
             atomic_write(path, write)
         return path.name, path.stat().st_size, mesh_name
+
+    def _sha(self, name: str) -> str | None:
+        return file_sha256(self.fields_dir / name) if name else None
 
     def write_job(
         self,
@@ -315,6 +355,9 @@ class Store:
             "dolfinx_version": attrs.get("dolfinx_version"),
             "python_version": sys.version.split()[0],
             "jit_time_s": _float_or_none(attrs.get("jit_time_s")),
+            "result_fingerprint": self.fingerprint(job),
+            "fields_file_sha256": self._sha(fields_file),
+            "mesh_file_sha256": self._sha(mesh_file),
         }
         rows = []
         for k in range(stages[0], stages[1] + 1):
@@ -338,7 +381,10 @@ class Store:
             "failure_class": outcome.failure_class,
             "fields_file": fields_file,
             "fields_bytes": fields_bytes,
+            "fields_sha256": common["fields_file_sha256"],
             "mesh_file": mesh_file,
+            "mesh_sha256": common["mesh_file_sha256"],
+            "fingerprint": common["result_fingerprint"],
             "sha256": content_digest(table),
         }
         table = table.replace_schema_metadata({META_KEY: json.dumps(meta).encode()})
@@ -356,6 +402,14 @@ def _write_mesh(tmp: str, mesh: Any, digest: str, geometry_id: str) -> None:
         g = dst.create_group(MESH_GROUP)
         for name, ds in mesh.items():
             _copy_dataset(ds, g, name)
+
+
+def _footer_of(path: Path) -> dict[str, Any]:
+    try:
+        meta = json.loads((pq.read_schema(path).metadata or {})[META_KEY])
+    except Exception:  # noqa: BLE001 - a damaged footer names no files to move
+        return {}
+    return meta if isinstance(meta, dict) else {}
 
 
 def _mesh_file_digest(path: Path) -> str | None:

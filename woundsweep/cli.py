@@ -98,6 +98,10 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     except click.exceptions.Exit as err:
         return err.exit_code
+    except OSError as err:  # a filesystem error on a path no command anticipated: one line too
+        where = f"{err.filename}: " if err.filename else ""
+        click.echo(f"woundsweep: error: {where}{err.strerror or err}", err=True)
+        return 2
     return rv if isinstance(rv, int) else 0
 
 

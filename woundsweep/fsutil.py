@@ -1,13 +1,16 @@
-"""Atomic file writes: readers see the old file or the complete new one, never a partial one."""
+"""Atomic file writes (readers see the old file or the complete new one, never a partial one)
+and bounded reads of small input text files."""
 
 from __future__ import annotations
 
+import errno
 import os
+import stat
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
 
-__all__ = ["atomic_write", "atomic_write_bytes"]
+__all__ = ["atomic_write", "atomic_write_bytes", "read_small_text"]
 
 
 def _umask() -> int:
@@ -56,3 +59,51 @@ def atomic_write_bytes(path: str | Path, data: bytes) -> None:
             fh.write(data)
 
     atomic_write(path, _write)
+
+
+def _kind(mode: int) -> str:
+    if stat.S_ISDIR(mode):
+        return "a directory"
+    if stat.S_ISFIFO(mode):
+        return "a named pipe"
+    if stat.S_ISCHR(mode) or stat.S_ISBLK(mode):
+        return "a device"
+    if stat.S_ISSOCK(mode):
+        return "a socket"
+    return "not a regular file"
+
+
+def read_small_text(path: str | Path, max_bytes: int, expected: str = "a text file") -> str:
+    """The UTF-8 text of a regular file of at most ``max_bytes``; ``ValueError`` otherwise.
+
+    The file is opened without blocking (a named pipe with no writer cannot hang the caller)
+    and checked with ``fstat`` before anything is read; at most ``max_bytes + 1`` bytes are
+    read. Binary data (NUL bytes), UTF-16/32 and invalid UTF-8 are refused. The message of
+    the ``ValueError`` is one line naming the problem (the caller adds the file name).
+    """
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_NOCTTY", 0))
+    except OSError as err:
+        raise ValueError(f"cannot read file ({err.strerror})") from None
+    try:
+        mode = os.fstat(fd).st_mode
+        if not stat.S_ISREG(mode):
+            raise ValueError(f"{_kind(mode)}, not {expected}")
+        with os.fdopen(os.dup(fd), "rb") as fh:
+            data = fh.read(max_bytes + 1)
+    except OSError as err:
+        if err.errno == errno.EISDIR:
+            raise ValueError(f"a directory, not {expected}") from None
+        raise ValueError(f"cannot read file ({err.strerror})") from None
+    finally:
+        os.close(fd)
+    if len(data) > max_bytes:
+        raise ValueError(f"larger than {max_bytes} bytes, not {expected}")
+    if data[:2] in (b"\xff\xfe", b"\xfe\xff"):
+        raise ValueError(f"UTF-16/32 encoded; expected {expected} in UTF-8")
+    if b"\0" in data:
+        raise ValueError(f"binary data (NUL bytes), not {expected}")
+    try:
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError as err:
+        raise ValueError(f"not UTF-8 (byte {err.start}); expected {expected} in UTF-8") from None

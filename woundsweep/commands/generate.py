@@ -6,64 +6,114 @@ import json
 from pathlib import Path
 
 import click
-import yaml
+import pandas as pd
 
 from ..errors import StoreError, SweepError
 from ..fsutil import atomic_write, atomic_write_bytes
 from ..provenance import provenance
-from ..sweep.grid import expand, load_sweep, parse_sweep
+from ..sweep.grid import MANIFEST_COLUMNS, MAX_JOBS, expand, parse_sweep_text, read_sweep_text
 
-__all__ = ["cmd", "generate"]
+__all__ = ["cmd", "generate", "stale_results"]
 
 
 def _existing_sweep(run_dir: Path) -> dict | None:
     path = run_dir / "sweep.yaml"
-    if not path.is_file():
+    if not path.exists():
         return None
     try:
-        return parse_sweep(yaml.safe_load(path.read_text()), str(path)).resolved()
-    except (SweepError, yaml.YAMLError):
+        return parse_sweep_text(read_sweep_text(path), path).resolved()
+    except SweepError:
         return {"unreadable": True}
 
 
+def _manifest_matches(path: Path, manifest: pd.DataFrame) -> bool:
+    """Does the stored manifest read back whole and equal the expansion of its sweep?"""
+    try:
+        old = pd.read_parquet(path)
+        return bool(old[list(MANIFEST_COLUMNS)].equals(manifest))
+    except Exception:  # noqa: BLE001 - any failure to read it back means it must be rewritten
+        return False
+
+
+def stale_results(run_dir: Path, sweep, manifest: pd.DataFrame) -> tuple[int, int]:  # noqa: ANN001
+    """(stored results of the manifest's jobs that are stale, results of jobs not in it).
+
+    Reads only the footer records (cheap), so damaged files count as neither.
+    """
+    import pyarrow.parquet as pq
+
+    from ..sweep.identity import FORMAT_VERSION, fingerprints
+    from ..sweep.results import META_KEY, result_files
+
+    files, _ = result_files(run_dir)
+    if not files:
+        return 0, 0
+    expected = fingerprints(sweep, manifest)
+    stale = orphans = 0
+    for jid, p in files.items():
+        if jid not in expected:
+            orphans += 1
+            continue
+        try:
+            meta = json.loads((pq.read_schema(p).metadata or {})[META_KEY])
+        except Exception:  # noqa: BLE001 - damaged: `run` moves it aside
+            continue
+        if meta.get("format") != FORMAT_VERSION or meta.get("fingerprint") != expected[jid]:
+            stale += 1
+    return stale, orphans
+
+
 def generate(
-    sweep_path: str | Path, run_dir: str | Path, *, force: bool = False
+    sweep_path: str | Path,
+    run_dir: str | Path,
+    *,
+    force: bool = False,
+    max_jobs: int = MAX_JOBS,
 ) -> tuple[int, bool]:
     """Write the manifest, the sweep copy and provenance; return (jobs, written).
 
     Re-generating from an equivalent sweep (same grid and settings, whatever the formatting)
-    is a no-op. A different sweep is refused unless ``force``; results are never deleted.
+    over a whole manifest is a no-op. A different sweep, or a manifest that is damaged or does
+    not match the run's sweep copy, is refused unless ``force``; results are never deleted.
     """
-    sweep = load_sweep(sweep_path)
-    manifest = expand(sweep)
+    text = read_sweep_text(sweep_path)
+    sweep = parse_sweep_text(text, sweep_path)
+    manifest = expand(sweep, max_jobs)
     rd = Path(run_dir)
     if rd.exists() and not rd.is_dir():
         raise StoreError(f"{rd}: exists and is not a directory")
     old = _existing_sweep(rd)
     new = json.loads(json.dumps(sweep.resolved() | {"path": None}))
-    if old is not None:
+    if old is not None and not force:
         old = json.loads(json.dumps(old | {"path": None}))
-        if old == new and (rd / "manifest.parquet").is_file():
-            return len(manifest), False
-        if not force:
+        if old != new:
             raise StoreError(
                 f"{rd}: already holds a run made from a different sweep (use --force to replace "
                 "its manifest; results are kept)"
             )
-    rd.mkdir(parents=True, exist_ok=True)
-    text = Path(sweep_path).read_text()
-    atomic_write(rd / "manifest.parquet", lambda tmp: manifest.to_parquet(tmp, index=False))
-    prov = provenance() | {
-        "sweep_file": str(Path(sweep_path).resolve()),
-        "sweep_name": sweep.name,
-        "jobs": len(manifest),
-        "geometries": int(manifest["geometry_id"].nunique()),
-        "units": {"length": "mm", "stress": "kPa", "force": "mN", "time": "s"},
-        "resolved_sweep": new,
-    }
-    atomic_write_bytes(rd / "provenance.json", (json.dumps(prov, indent=2) + "\n").encode())
-    # The sweep copy goes last: its presence marks a complete generate.
-    atomic_write_bytes(rd / "sweep.yaml", text.encode())
+        if _manifest_matches(rd / "manifest.parquet", manifest):
+            return len(manifest), False
+        raise StoreError(
+            f"{rd / 'manifest.parquet'}: missing, damaged or not the expansion of "
+            f"{rd / 'sweep.yaml'} (use --force to rewrite it; results are kept)"
+        )
+    try:
+        rd.mkdir(parents=True, exist_ok=True)
+        atomic_write(rd / "manifest.parquet", lambda tmp: manifest.to_parquet(tmp, index=False))
+        prov = provenance() | {
+            "sweep_file": str(Path(sweep_path).resolve()),
+            "sweep_name": sweep.name,
+            "jobs": len(manifest),
+            "geometries": int(manifest["geometry_id"].nunique()),
+            "units": {"length": "mm", "stress": "kPa", "force": "mN", "time": "s"},
+            "resolved_sweep": new,
+        }
+        atomic_write_bytes(rd / "provenance.json", (json.dumps(prov, indent=2) + "\n").encode())
+        # The sweep copy goes last: its presence marks a complete generate.
+        atomic_write_bytes(rd / "sweep.yaml", text.encode())
+    except OSError as err:
+        where = err.filename or rd
+        raise StoreError(f"{where}: cannot write the run directory ({err.strerror})") from None
     return len(manifest), True
 
 
@@ -74,17 +124,31 @@ def generate(
     help="Run directory to create (manifest.parquet, sweep.yaml, provenance.json).",
 )  # fmt: skip
 @click.option(
-    "--force", is_flag=True, help="Replace the manifest of a run made from another sweep."
-)
-def cmd(sweep_file: Path, run_dir: Path, force: bool) -> None:
+    "--force", is_flag=True,
+    help="Replace the manifest of a run made from another sweep (or a damaged one).",
+)  # fmt: skip
+@click.option(
+    "--max-jobs", type=click.IntRange(min=1), default=MAX_JOBS, show_default=True,
+    help="Refuse grids with more jobs than this (counted before exclusions).",
+)  # fmt: skip
+def cmd(sweep_file: Path, run_dir: Path, force: bool, max_jobs: int) -> None:
     """Expand SWEEP_FILE into one job per parameter combination.
 
     Writes RUN_DIR/manifest.parquet (one row per job: job_index, job_id, geometry_id, the
     parameters and the derived lengths in mm), a copy of the sweep and provenance.json.
+    Over an existing run (--force) it says how many stored results the new sweep makes stale.
     """
-    n, written = generate(sweep_file, run_dir, force=force)
-    if written:
-        man = run_dir / "manifest.parquet"
-        click.echo(f"{n} jobs written to {man}")
-    else:
+    n, written = generate(sweep_file, run_dir, force=force, max_jobs=max_jobs)
+    if not written:
         click.echo(f"{run_dir} is up to date ({n} jobs, same sweep): nothing to do")
+        return
+    click.echo(f"{n} jobs written to {run_dir / 'manifest.parquet'}")
+    from ..sweep.grid import load_run
+
+    run = load_run(run_dir)
+    stale, orphans = stale_results(run.run_dir, run.sweep, run.manifest)
+    if stale or orphans:
+        click.echo(
+            f"stored results: {stale} stale (computed with other settings; `woundsweep run` "
+            f"recomputes them), {orphans} of jobs not in the manifest (kept, ignored)"
+        )

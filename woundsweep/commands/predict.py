@@ -8,6 +8,8 @@ from pathlib import Path
 
 import click
 
+from ..clitypes import FiniteFloat
+
 __all__ = ["cmd"]
 
 
@@ -37,7 +39,9 @@ _NUMERIC_PARAMS = (
 def _numeric_params(f: Callable[..., None]) -> Callable[..., None]:
     """One float option per `_NUMERIC_PARAMS` entry, in that order, named by its column."""
     for flag, column, required, text in reversed(_NUMERIC_PARAMS):
-        f = click.option(flag, column, type=float, required=required, default=None, help=text)(f)
+        f = click.option(
+            flag, column, type=FiniteFloat(), required=required, default=None, help=text
+        )(f)
     return f
 
 
@@ -74,15 +78,20 @@ def cmd(
     in kPa (the end classes are bounded by the smallest / largest training stress).
     """
     from ..analysis import load_model, predict
+    from ..errors import AnalysisError
 
-    loaded = load_model(model, scheme)
+    try:
+        loaded = load_model(model, scheme)
+        quantiles = int(loaded.meta["quantiles"])
+    except (AttributeError, TypeError, KeyError, ValueError) as err:  # e.g. metadata `null`
+        raise AnalysisError(f"{model}: malformed model metadata ({type(err).__name__})") from None
     params = {
         "wound_shape": shape,
         **{column: numeric[column] for _, column, _, _ in _NUMERIC_PARAMS},
         "skin_type": skin_type,
     }
     preds = predict(loaded, params, list(stages) or None, allow_extrapolation)
-    q = loaded.meta["quantiles"]
+    q = quantiles
     if as_json:
         out = {
             "model": str(loaded.path),

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import click
 
+from ..clitypes import FiniteFloat
 from ..errors import StoreError
 from ..schema import FailureClass, parse_stage_range
 from ..sweep.runner import RunOptions, RunSummary, run_shard
@@ -52,7 +53,7 @@ def _summary_line(s: RunSummary, run_dir: Path) -> str:
 @click.option(
     "--timeout",
     "timeout_s",
-    type=click.FloatRange(min=1),
+    type=FiniteFloat(min=1, max=1e7),
     default=1800,
     show_default=True,
     help="Wall-clock limit per job attempt, seconds.",
@@ -60,7 +61,7 @@ def _summary_line(s: RunSummary, run_dir: Path) -> str:
 @click.option(
     "--max-memory",
     "max_memory_gb",
-    type=click.FloatRange(min=0.05),
+    type=FiniteFloat(min=0.05, max=1e6),
     default=None,
     help="Resident memory cap per job, GB [default: 90% of RAM / workers].",
 )
@@ -95,7 +96,7 @@ def _summary_line(s: RunSummary, run_dir: Path) -> str:
 @click.option(
     "--jit-stale-after",
     "jit_stale_after_s",
-    type=click.FloatRange(min=1),
+    type=FiniteFloat(min=1, max=1e7),
     default=600,
     show_default=True,
     help="Age (s) after which an FFCx JIT lock is considered stale.",
@@ -132,6 +133,11 @@ def cmd(
     k = workers or _default_workers()
     if max_memory_gb is None:
         cap = int(0.9 * _memory_bytes() / k)
+        if cap < 0.05e9:
+            raise StoreError(
+                f"--workers {k}: 90% of the memory / {k} leaves {cap / 1e6:.0f} MB per job, "
+                "under the 50 MB minimum; use fewer workers or give --max-memory"
+            )
     else:
         cap = int(max_memory_gb * 1e9)
     opts = RunOptions(

@@ -15,6 +15,7 @@ from ..sweep.slurm import (
     SlurmOptions,
     SubmitError,
     check_path,
+    mem_bytes,
     parse_extra,
     parse_mem,
     parse_stages,
@@ -26,6 +27,9 @@ from ..sweep.slurm import (
 )
 
 __all__ = ["cmd"]
+
+# The range of `woundsweep run --max-memory` (commands/run.py), which the scripts pass on.
+MIN_JOB_GB, MAX_JOB_GB = 0.05, 1e6
 
 
 def _word(value: str | None, option: str) -> str | None:
@@ -87,6 +91,13 @@ def cmd(
         raise SlurmError(f"--cpus-per-task {cpus_per_task}: need at least 1")
     time_ = parse_time(time_) if time_ is not None else None
     mem = parse_mem(mem) if mem is not None else None
+    per_job_gb = 0.9 * mem_bytes(mem) / cpus_per_task / 1e9 if mem is not None else None
+    if per_job_gb is not None and not MIN_JOB_GB <= round(per_job_gb, 2) <= MAX_JOB_GB:
+        raise SlurmError(
+            f"--mem {mem}: 90% of it over {cpus_per_task} workers is {per_job_gb:.3g} GB per "
+            f"job, outside the {MIN_JOB_GB}-{MAX_JOB_GB:g} GB that `woundsweep run --max-memory` "
+            "accepts"
+        )
     lines = tuple(parse_extra(e) for e in extra)
     stages = parse_stages(stages) if stages is not None else None
     rd = check_path(Path(os.path.abspath(run_dir)), "RUN_DIR")

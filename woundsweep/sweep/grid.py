@@ -24,7 +24,9 @@ import pandas as pd
 import yaml
 
 from ..analysis.settings import ModelSettings
-from ..errors import StoreError, SweepError
+from ..errors import GeometryError, StoreError, SweepError
+from ..fsutil import read_small_text
+from ..mesh.spec import GeometrySpec
 from ..model.parameters import CLOSURE_LOADS, STAGE_SETTINGS, TABLE2
 from ..solver.settings import NewtonSettings
 from .rules import compile_rule, evaluate_rule
@@ -33,14 +35,23 @@ __all__ = [
     "DEFAULTS",
     "GEOMETRY_KEYS",
     "MANIFEST_COLUMNS",
+    "MAX_JOBS",
+    "MAX_SWEEP_BYTES",
     "Run",
     "Sweep",
     "canonical_hash",
+    "count_jobs",
     "expand",
     "load_run",
     "load_sweep",
     "parse_sweep",
+    "read_sweep_text",
 ]
+
+# A sweep file is a small text file; anything larger is refused before it is read whole.
+MAX_SWEEP_BYTES = 1_000_000
+# Grids above this many jobs (before exclusions) are refused before they are expanded.
+MAX_JOBS = 1_000_000
 
 # Grid axes in canonical order: job_index follows this order whatever the YAML key order is.
 GRID_AXES = (
@@ -135,7 +146,12 @@ class Run(NamedTuple):
 
 
 def _is_number(v: Any) -> bool:
-    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+    if not isinstance(v, (int, float)) or isinstance(v, bool):
+        return False
+    try:
+        return math.isfinite(v)
+    except OverflowError:  # an integer too large for a float
+        return False
 
 
 def _axis(path: str, key: str, values: Any, *, kind: str = "positive") -> list[Any]:
@@ -169,6 +185,10 @@ def _merge(path: str, key: str, default: Any, given: Any) -> Any:
             out = {}
             template = default["normal"]
             for name, params in given.items():
+                if not isinstance(name, str) or not isinstance(params, dict):
+                    raise SweepError(
+                        path, f"{key}.{name}", "expected a skin type name with a mapping of values"
+                    )
                 base = default.get(name)
                 if base is None:
                     missing = set(template) - set(params or {})
@@ -186,6 +206,8 @@ def _merge(path: str, key: str, default: Any, given: Any) -> Any:
             )
         return {k: _merge(path, f"{key}.{k}", default[k], given.get(k)) for k in default}
     if isinstance(default, str):
+        if not isinstance(given, str):
+            raise SweepError(path, key, f"expected one of {list(CHOICES[key])}, got {given!r}")
         if key in REMOVED_CHOICES and given in REMOVED_CHOICES[key]:
             raise SweepError(path, key, REMOVED_CHOICES[key][given])
         if given not in CHOICES[key]:
@@ -246,6 +268,19 @@ def parse_sweep(data: Any, path: str = "<sweep>") -> Sweep:
             raise SweepError(path, f"shapes.{shape}", f"expected exactly the key {axis!r}")
         kind = "nonnegative" if shape == "cylindrical" else "positive"
         shapes[shape] = {axis: _axis(path, f"shapes.{shape}.{axis}", spec[axis], kind=kind)}
+    if max(grid["mesh_size_factor"]) > 1:
+        raise SweepError(
+            path,
+            "grid.mesh_size_factor",
+            f"expected factors in (0, 1] (larger is finer), got {max(grid['mesh_size_factor'])!r}",
+        )
+    if max(grid["wound_width_factor"]) > 2:
+        raise SweepError(
+            path,
+            "grid.wound_width_factor",
+            "expected factors up to 2 (the width is a fraction of the patch half-length and "
+            f"must fit the patch), got {max(grid['wound_width_factor'])!r}",
+        )
     if "wedge" in shapes and max(shapes["wedge"]["wound_depth_factor"]) >= 1:
         raise SweepError(
             path,
@@ -284,13 +319,27 @@ def parse_sweep(data: Any, path: str = "<sweep>") -> Sweep:
     )
 
 
+def read_sweep_text(path: str | Path) -> str:
+    """The text of a sweep file: a regular UTF-8 text file of at most `MAX_SWEEP_BYTES`.
+
+    Anything else (a directory, a named pipe, a device, a binary or UTF-16 file) is refused
+    at once (`fsutil.read_small_text`: no blocking open, no read beyond the limit).
+    """
+    try:
+        return read_small_text(path, MAX_SWEEP_BYTES, "a YAML text file")
+    except ValueError as err:
+        raise SweepError(path, "", str(err)) from None
+
+
 def load_sweep(path: str | Path) -> Sweep:
     """Read and validate a sweep YAML file."""
     p = Path(path)
-    try:
-        text = p.read_text()
-    except OSError as err:
-        raise SweepError(p, "", f"cannot read file ({err.strerror})") from None
+    return parse_sweep_text(read_sweep_text(p), p)
+
+
+def parse_sweep_text(text: str, path: str | Path) -> Sweep:
+    """Parse and validate the YAML text of a sweep file (``path`` names it in errors)."""
+    p = Path(path)
     try:
         data = yaml.safe_load(text)
     except yaml.YAMLError as err:
@@ -298,6 +347,8 @@ def load_sweep(path: str | Path) -> Sweep:
         where = f"line {mark.line + 1}" if mark is not None else "YAML"
         problem = getattr(err, "problem", None) or "invalid YAML"
         raise SweepError(p, where, f"YAML syntax error: {problem}") from None
+    except RecursionError:
+        raise SweepError(p, "YAML", "nested too deeply") from None
     return parse_sweep(data, str(p))
 
 
@@ -330,8 +381,39 @@ def _derive(df: pd.DataFrame) -> pd.DataFrame:
     return df
 
 
-def expand(sweep: Sweep) -> pd.DataFrame:
-    """Expand a sweep into the manifest (one row per job, geometry-major stable order)."""
+def count_jobs(sweep: Sweep) -> int:
+    """The jobs of the grid before exclusions (computed without expanding it)."""
+    common = math.prod(len(sweep.grid[k]) for k in GRID_AXES)
+    return sum(common * len(sweep.shapes[s][SHAPE_AXES[s]]) for s in sweep.shapes)
+
+
+def _check_geometries(sweep: Sweep, df: pd.DataFrame) -> None:
+    """Every geometry must be buildable (`GeometrySpec`), so no job fails on its ranges later."""
+    for row in df.drop_duplicates(list(GEOMETRY_KEYS)).to_dict("records"):
+        try:
+            GeometrySpec.from_row(row)
+        except GeometryError as err:
+            where = ", ".join(
+                f"{k}={row[k]:g}" if isinstance(row[k], float) else f"{k}={row[k]}"
+                for k in GEOMETRY_KEYS
+                if not (isinstance(row[k], float) and math.isnan(row[k]))
+            )
+            raise SweepError(sweep.path, "grid", f"geometry {where}: {err}") from None
+
+
+def expand(sweep: Sweep, max_jobs: int = MAX_JOBS) -> pd.DataFrame:
+    """Expand a sweep into the manifest (one row per job, geometry-major stable order).
+
+    A grid of more than ``max_jobs`` jobs (before exclusions) is refused before expansion.
+    """
+    total = count_jobs(sweep)
+    if total > max_jobs:
+        raise SweepError(
+            sweep.path,
+            "grid",
+            f"the grid has {total} jobs before exclusions, above the limit of {max_jobs} "
+            "(generate --max-jobs raises it)",
+        )
     rows = []
     for shape in sorted(sweep.shapes):
         axis = SHAPE_AXES[shape]
@@ -350,11 +432,13 @@ def expand(sweep: Sweep) -> pd.DataFrame:
     keep = np.ones(len(df), dtype=bool)
     for i, rule in enumerate(sweep.exclude):
         tree = compile_rule(sweep.path, f"exclude[{i}]", rule, _RULE_NAMES)
-        hit = evaluate_rule(tree, df)
+        with np.errstate(all="ignore"):  # x / 0 is inf, as in NumPy; no warning on stderr
+            hit = evaluate_rule(tree, df)
         keep &= ~np.broadcast_to(np.asarray(hit, dtype=bool), keep.shape)
     df = df[keep].reset_index(drop=True)
     if df.empty:
         raise SweepError(sweep.path, "exclude", "the grid expands to zero jobs")
+    _check_geometries(sweep, df)
     job_keys = [*GEOMETRY_KEYS, "skin_type", "orientation_deg"]
     records = df[job_keys].to_dict("records")
     df["job_id"] = [canonical_hash(r) for r in records]

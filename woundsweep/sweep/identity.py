@@ -82,8 +82,7 @@ def result_fingerprint(settings: Mapping[str, Any], job: Mapping[str, Any]) -> s
 def fingerprints(settings: Mapping[str, Any], manifest: Any) -> dict[str, str]:
     """``job_id -> result_fingerprint`` for every row of a manifest (a DataFrame)."""
     return {
-        str(row["job_id"]): result_fingerprint(settings, row)
-        for row in manifest.to_dict("records")
+        str(row["job_id"]): result_fingerprint(settings, row) for row in manifest.to_dict("records")
     }
 
 

@@ -2,7 +2,9 @@
 
 A rule is a Python expression restricted to names (columns), numbers, strings, arithmetic,
 comparisons and ``and``/``or``/``not``; it is evaluated column-wise with NumPy, and the rows
-where it is true are dropped from the manifest.
+where it is true are dropped from the manifest. `compile_rule` also checks its types when the
+sweep loads: arithmetic and ordering take numbers, ``==``/``!=`` compare like with like,
+``and``/``or``/``not`` take conditions, and the whole rule is a condition.
 """
 
 from __future__ import annotations
@@ -16,7 +18,11 @@ import pandas as pd
 
 from ..errors import SweepError
 
-__all__ = ["compile_rule", "evaluate_rule"]
+__all__ = ["STRING_COLUMNS", "compile_rule", "evaluate_rule"]
+
+# The manifest columns that hold names; every other column a rule may name is a number.
+STRING_COLUMNS = frozenset({"wound_shape", "skin_type"})
+_KIND_NAMES = {"num": "a number", "str": "a string", "bool": "a condition"}
 
 _ALLOWED = (
     ast.Expression, ast.BoolOp, ast.And, ast.Or, ast.UnaryOp, ast.Not, ast.USub, ast.BinOp,
@@ -29,8 +35,8 @@ def compile_rule(path: str, key: str, rule: str, names: Collection[str]) -> ast.
     """Parse and check ``rule`` (only ``names`` may appear); raise `SweepError` at ``key``."""
     try:
         tree = ast.parse(rule, mode="eval")
-    except SyntaxError:
-        raise SweepError(path, key, f"cannot parse rule {rule!r}") from None
+    except (SyntaxError, ValueError, RecursionError, MemoryError):
+        raise SweepError(path, key, f"cannot parse rule {_short(rule)}") from None
     for node in ast.walk(tree):
         if not isinstance(node, _ALLOWED):
             raise SweepError(
@@ -42,7 +48,60 @@ def compile_rule(path: str, key: str, rule: str, names: Collection[str]) -> ast.
             )
         if isinstance(node, ast.Constant) and not isinstance(node.value, (int, float, str)):
             raise SweepError(path, key, f"unsupported constant {node.value!r} in rule {rule!r}")
+    try:
+        kind = _kind(tree.body)
+    except TypeError as err:
+        raise SweepError(path, key, f"rule {_short(rule)}: {err}") from None
+    except RecursionError:
+        raise SweepError(path, key, f"rule {_short(rule)}: nested too deeply") from None
+    if kind != "bool":
+        raise SweepError(
+            path, key, f"rule {_short(rule)} is {_KIND_NAMES[kind]}, expected a condition"
+        )
     return tree
+
+
+def _short(rule: str) -> str:
+    return repr(rule if len(rule) <= 80 else rule[:77] + "...")
+
+
+def _kind(node: ast.AST) -> str:
+    """``num``, ``str`` or ``bool``: the type of a checked node; TypeError if they do not fit."""
+    if isinstance(node, ast.Constant):
+        v = node.value
+        return "bool" if isinstance(v, bool) else "str" if isinstance(v, str) else "num"
+    if isinstance(node, ast.Name):
+        return "str" if node.id in STRING_COLUMNS else "num"
+    if isinstance(node, ast.UnaryOp):
+        k = _kind(node.operand)
+        want = "bool" if isinstance(node.op, ast.Not) else "num"
+        if k != want:
+            op = "not" if want == "bool" else "unary -"
+            raise TypeError(f"{op} takes {_KIND_NAMES[want]}, got {_KIND_NAMES[k]}")
+        return want
+    if isinstance(node, ast.BinOp):
+        kinds = (_kind(node.left), _kind(node.right))
+        if kinds != ("num", "num"):
+            bad = next(k for k in kinds if k != "num")
+            raise TypeError(f"arithmetic takes numbers, got {_KIND_NAMES[bad]}")
+        return "num"
+    if isinstance(node, ast.BoolOp):
+        for v in node.values:
+            k = _kind(v)
+            if k != "bool":
+                raise TypeError(f"and/or take conditions, got {_KIND_NAMES[k]}")
+        return "bool"
+    if isinstance(node, ast.Compare):
+        left = _kind(node.left)
+        for op, comp in zip(node.ops, node.comparators):
+            right = _kind(comp)
+            if left != right:
+                raise TypeError(f"compares {_KIND_NAMES[left]} with {_KIND_NAMES[right]}")
+            if not isinstance(op, (ast.Eq, ast.NotEq)) and left != "num":
+                raise TypeError(f"<, <=, >, >= take numbers, got {_KIND_NAMES[left]}")
+            left = right
+        return "bool"
+    raise TypeError(f"unsupported syntax {type(node).__name__}")
 
 
 def evaluate_rule(node: ast.AST, df: pd.DataFrame) -> Any:

@@ -43,7 +43,6 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from .. import __version__
-from ..errors import StoreError
 from ..fsutil import atomic_write
 from ..schema import FailureClass, StageStatus
 from ..solverfile import MESH_DATASETS, MESH_GROUP, SolverOutput, stage_group, stage_of_group

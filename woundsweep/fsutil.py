@@ -10,7 +10,7 @@ import tempfile
 from collections.abc import Callable
 from pathlib import Path
 
-__all__ = ["atomic_write", "atomic_write_bytes", "read_small_text"]
+__all__ = ["atomic_write", "atomic_write_bytes", "check_output_file", "read_small_text"]
 
 
 def _umask() -> int:
@@ -107,3 +107,19 @@ def read_small_text(path: str | Path, max_bytes: int, expected: str = "a text fi
         return data.decode("utf-8-sig")
     except UnicodeDecodeError as err:
         raise ValueError(f"not UTF-8 (byte {err.start}); expected {expected} in UTF-8") from None
+
+
+def check_output_file(path: str | Path) -> None:
+    """``ValueError`` (one line) unless ``path`` can be written as a file: it is not a
+    directory, and its nearest existing ancestor is a writable directory (missing parents are
+    created by the writer). Checked before long work, so it fails at once, not at the end."""
+    p = Path(os.path.abspath(path))
+    if p.is_dir():
+        raise ValueError(f"{p}: is a directory, not a file")
+    parent = p.parent
+    while not parent.exists():
+        parent = parent.parent
+    if not parent.is_dir():
+        raise ValueError(f"{p}: {parent} is not a directory")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise ValueError(f"{p}: cannot write in {parent} (permission denied or read-only)")

@@ -12,7 +12,7 @@ import pandas as pd
 from tqdm import tqdm
 
 from ..errors import GeometryError
-from ..fsutil import atomic_write
+from ..fsutil import atomic_write, check_output_file
 from ..mesh.build import MeshData
 from ..mesh.cache import CachedMesh, get_mesh
 from ..mesh.spec import GeometrySpec
@@ -114,6 +114,11 @@ def cmd(
         raise click.UsageError("give exactly one of --job N, --geometry ID or --all")
     if out is not None and (all_ or out.suffix.lower() != ".vtu"):
         raise click.UsageError("--out takes a .vtu file and needs --job or --geometry")
+    if out is not None:
+        try:
+            check_output_file(out)
+        except ValueError as err:
+            raise click.BadParameter(str(err), param_hint="--out") from None
     run = load_run(run_dir)
     man = run.manifest
     if all_:

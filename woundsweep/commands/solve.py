@@ -13,6 +13,7 @@ from pathlib import Path
 import click
 
 from ..errors import SolverError
+from ..fsutil import check_output_file
 from ..schema import ExitCode, StageResult, StageStatus, parse_stage_range
 
 __all__ = ["cmd"]
@@ -57,9 +58,14 @@ def cmd(run_dir: Path, job_index: int, stages_text: str, out: Path | None) -> No
     # Each job is one serial process; threaded BLAS would only fight the sibling workers.
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
     os.environ.setdefault("OMP_NUM_THREADS", "1")
+    stages = parse_stage_range(stages_text, SolverError)
+    if out is not None:
+        try:
+            check_output_file(out)
+        except ValueError as err:
+            raise SolverError(f"--out {err}") from None
     from ..model.job import NotConvergedError, StageRecord, solve_job
 
-    stages = parse_stage_range(stages_text, SolverError)
     logging.getLogger().setLevel(logging.WARNING)  # FFCx/cffi log every compile at INFO
 
     click.echo(f"job {job_index}: stages {stages[0]}-{stages[1]}")

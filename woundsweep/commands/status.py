@@ -10,7 +10,7 @@ import click
 
 from ..schema import FailureClass
 from ..sweep.grid import load_run
-from ..sweep.results import read_results, summarize
+from ..sweep.results import scan_results, scan_store, summarize
 
 __all__ = ["cmd", "format_status"]
 
@@ -33,6 +33,18 @@ def format_status(s: dict[str, Any]) -> str:
     ]
     if s["orphan_jobs"]:
         lines.append(f"  {s['orphan_jobs']} stored jobs are not in the manifest (ignored)")
+    if s.get("jobs_stale"):
+        lines.append(
+            f"  {s['jobs_stale']} stored results are stale (other settings, stages or result"
+            " format): pending, `woundsweep run` recomputes them"
+        )
+    if s.get("jobs_damaged"):
+        lines.append(
+            f"  {s['jobs_damaged']} stored results are damaged (e.g. {s['damaged_example']}):"
+            " pending, `woundsweep run` moves them to corrupt/ and redoes them"
+        )
+    if s.get("stray_files"):
+        lines.append(f"  {s['stray_files']} files in results/ are not the store's (ignored)")
     lines.append("by failure class:")
     for cls, n in s["by_failure_class"].items():
         extra = ""
@@ -66,11 +78,13 @@ def format_status(s: dict[str, Any]) -> str:
 def cmd(run_dir: Path, as_json: bool) -> None:
     """Counts by failure class and by stage, throughput, CPU time used and left.
 
-    Every result file is validated; a corrupt one is named on one line (rerun
-    `woundsweep run` to move it aside and redo the job).
+    Every result file is validated, with the checksums of its fields and mesh files; stale
+    results (computed with other settings) and damaged ones count as pending (rerun
+    `woundsweep run`: it recomputes them, moving damaged files to RUN_DIR/corrupt/).
     """
     run = load_run(run_dir)
-    s = summarize(run.manifest, read_results(run.run_dir))
+    scan = scan_store(run.run_dir)
+    s = summarize(run.manifest, scan_results(scan), scan)
     if as_json:
         click.echo(json.dumps({"run_dir": str(run.run_dir), **s}, indent=2))
     else:

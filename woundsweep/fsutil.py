@@ -121,5 +121,8 @@ def check_output_file(path: str | Path) -> None:
         parent = parent.parent
     if not parent.is_dir():
         raise ValueError(f"{p}: {parent} is not a directory")
-    if not os.access(parent, os.W_OK | os.X_OK):
-        raise ValueError(f"{p}: cannot write in {parent} (permission denied or read-only)")
+    try:  # a real write: permission bits do not show a read-only mount, /proc, or root
+        with tempfile.TemporaryFile(prefix=".woundsweep-check.", dir=parent):
+            pass
+    except OSError as err:
+        raise ValueError(f"{p}: cannot write in {parent} ({err.strerror})") from None

@@ -23,9 +23,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any, NamedTuple
 
-import h5py
 import numpy as np
-import pandas as pd
 import pytest
 import yaml
 
@@ -33,7 +31,7 @@ from woundsweep.solverfile import read_solver_file
 from woundsweep.sweep.grid import load_run
 from woundsweep.sweep.identity import result_fingerprint
 from woundsweep.sweep.results import read_results
-from woundsweep.sweep.store import JobOutcome, Store
+from woundsweep.sweep.store import Store
 
 ROOT = Path(__file__).resolve().parent
 DEMO = yaml.safe_load((ROOT.parent / "sweeps" / "demo.yaml").read_text())
@@ -444,7 +442,14 @@ def _predict(opt: str | None, value: str, prep: Callable[[Path], None] | None = 
     def setup(ws: Path) -> list[str]:
         if prep is not None:
             prep(ws)
-        args = ["predict", str(ws / "model_geometry.json"), "--shape", "wedge", "--skin-type", "stiff"]
+        args = [
+            "predict",
+            str(ws / "model_geometry.json"),
+            "--shape",
+            "wedge",
+            "--skin-type",
+            "stiff",
+        ]
         for k, v in PREDICT_BASE.items():
             args += [k, value if k == opt else v]
         return args
@@ -499,7 +504,13 @@ def test_bad_input_one_line(case: Case, cli: Cli, template: Path, tmp_path: Path
         assert not watched.exists()
 
 
-SUBPROCESS_SAMPLE = ["file-fifo", "run--timeout-0", "rule-0", "gen-out-under-file", "predict-meta-0"]
+SUBPROCESS_SAMPLE = [
+    "file-fifo",
+    "run--timeout-0",
+    "rule-0",
+    "gen-out-under-file",
+    "predict-meta-0",
+]
 
 
 @pytest.mark.parametrize("case_id", SUBPROCESS_SAMPLE)
@@ -514,3 +525,145 @@ def test_python_m_woundsweep_agrees(case_id: str, cli: Cli, template: Path, tmp_
         stdin=subprocess.DEVNULL,
     )  # fmt: skip
     assert (real.returncode, real.stderr) == (forked.code, forked.stderr)
+
+
+# ---- stale and damaged results: found by status, redone by run ----------------------------
+SMALL = {
+    **DEMO,
+    "grid": {**DEMO["grid"], "dermal_thickness_mm": [1], "wound_width_factor": [0.3]},
+    "shapes": {"cylindrical": {"wound_aspect_factor": [0, 0.2]}},
+}  # 2 geometries x 2 skin types = 4 jobs
+
+
+def _stored_run(tmp_path: Path, cli: Cli) -> Path:
+    """A 4-job run whose every job is stored as converged, fields and mesh files included."""
+    from test_store import _outcome, _solver_file
+
+    (tmp_path / "s.yaml").write_text(yaml.safe_dump(SMALL))
+    assert cli(["generate", "s.yaml", "--out", "run"], tmp_path).code == 0
+    rd = tmp_path / "run"
+    man = load_run(rd).manifest
+    store = Store(rd)
+    for i, job in man.iterrows():
+        src = tmp_path / f"solver-{i}.h5"
+        _solver_file(src, job, range(1, 7), mesh_seed=hash(job["geometry_id"]) % 1000)
+        out = read_solver_file(src, job["job_id"], (1, 6))
+        store.write_job(job.to_dict(), _outcome("converged", out), (1, 6), "final", "0/1")
+    return rd
+
+
+def _status(cli: Cli, rd: Path) -> dict[str, Any]:
+    res = cli(["status", str(rd), "--json"], rd.parent)
+    assert res.code == 0 and res.stderr == "", res.stderr
+    return json.loads(res.stdout)
+
+
+def _run_with_fault(rd: Path) -> subprocess.CompletedProcess[str]:
+    """`woundsweep run` whose solves exit at once with status 2 (class `invalid`): the
+    runner's resume, quarantine and store logic are the real ones; no DOLFINx needed."""
+    env = {**os.environ, "WOUNDSWEEP_FAULT": "exit:2"}
+    return subprocess.run(
+        [*WS, "run", str(rd), "--no-progress", "--no-warmup", "--workers", "2"],
+        capture_output=True, text=True, env=env, timeout=300,
+    )  # fmt: skip
+
+
+def _footer_fingerprint(path: Path) -> str:
+    import pyarrow.parquet as pq
+
+    return json.loads(pq.read_schema(path).metadata[b"woundsweep"])["fingerprint"]
+
+
+def test_materials_change_makes_results_stale_and_run_recomputes_them(
+    cli: Cli, tmp_path: Path
+) -> None:
+    rd = _stored_run(tmp_path, cli)
+    man0 = load_run(rd).manifest
+    s = _status(cli, rd)
+    assert (s["jobs_done"], s["jobs_stale"], s["jobs_pending"]) == (4, 0, 0)
+    soft = {p: p.read_bytes() for p in (rd / "results").iterdir() if "soft" in _skin(rd, p)}
+    # Other values for the stiff skin: the same job ids, other results.
+    doc = copy.deepcopy(SMALL)
+    doc["materials"] = {"skin_types": {"stiff": {"c_kPa": 50.0}, "soft": {}}}
+    (tmp_path / "s2.yaml").write_text(yaml.safe_dump(doc))
+    refused = cli(["generate", "s2.yaml", "--out", "run"], tmp_path)
+    assert refused.code == 2 and "--force" in refused.stderr
+    forced = cli(["generate", "s2.yaml", "--out", "run", "--force"], tmp_path)
+    assert forced.code == 0, forced.stderr
+    assert "stored results: 2 stale" in forced.stdout
+    run = load_run(rd)
+    assert run.manifest["job_id"].tolist() == man0["job_id"].tolist()  # job_id: parameters only
+    s = _status(cli, rd)
+    assert (s["jobs_done"], s["jobs_stale"], s["jobs_pending"]) == (2, 2, 2)
+    assert set(read_results(rd)["skin_type"]) == {"soft"}  # analyze sees only current rows
+    res = _run_with_fault(rd)
+    assert res.returncode == 0, res.stderr
+    assert "4 jobs in shard: 2 already done, 2 run (2 invalid)" in res.stdout
+    for _, job in run.manifest.iterrows():
+        path = rd / "results" / f"job-{job['job_id']}.parquet"
+        assert _footer_fingerprint(path) == result_fingerprint(run.sweep, job)
+    for p, data in soft.items():
+        assert p.read_bytes() == data  # current results are not touched
+    df = read_results(rd)
+    assert set(df.loc[df["skin_type"] == "stiff", "failure_class"]) == {"invalid"}
+    s = _status(cli, rd)
+    assert (s["jobs_done"], s["jobs_stale"], s["jobs_pending"]) == (4, 0, 0)
+
+
+def _skin(rd: Path, path: Path) -> str:
+    import pyarrow.parquet as pq
+
+    return str(pq.read_table(path, columns=["skin_type"]).column(0)[0])
+
+
+def test_same_size_damaged_fields_file_is_found_and_redone(cli: Cli, tmp_path: Path) -> None:
+    rd = _stored_run(tmp_path, cli)
+    man = load_run(rd).manifest
+    jid = man["job_id"].iloc[0]
+    fpath = rd / "fields" / f"{jid}.h5"
+    size = fpath.stat().st_size
+    fpath.write_bytes(np.random.default_rng(1).integers(0, 256, size, dtype=np.uint8).tobytes())
+    assert fpath.stat().st_size == size
+    s = _status(cli, rd)
+    assert (s["jobs_done"], s["jobs_damaged"], s["jobs_pending"]) == (3, 1, 1)
+    assert str(fpath) in s["damaged_example"] and "sha256" in s["damaged_example"]
+    res = _run_with_fault(rd)
+    assert res.returncode == 0, res.stderr
+    assert "4 jobs in shard: 3 already done, 1 run (1 invalid)" in res.stdout
+    moved = sorted(p.name.rsplit(".", 1)[0] for p in (rd / "corrupt").iterdir())
+    assert moved == [f"{jid}.h5", f"job-{jid}.parquet"]
+    df = read_results(rd)
+    assert df.loc[df["job_id"] == jid, "failure_class"].unique().tolist() == ["invalid"]
+    assert _status(cli, rd)["jobs_damaged"] == 0
+
+
+def test_truncated_mesh_file_redoes_the_jobs_of_its_geometry(cli: Cli, tmp_path: Path) -> None:
+    rd = _stored_run(tmp_path, cli)
+    man = load_run(rd).manifest
+    gid = man["geometry_id"].iloc[0]
+    mpath = rd / "fields" / f"mesh-{gid}.h5"
+    mpath.write_bytes(mpath.read_bytes()[:-64])
+    s = _status(cli, rd)
+    jobs = int((man["geometry_id"] == gid).sum())
+    assert (s["jobs_done"], s["jobs_damaged"]) == (4 - jobs, jobs)
+    res = _run_with_fault(rd)
+    assert res.returncode == 0, res.stderr
+    assert f"{4 - jobs} already done, {jobs} run ({jobs} invalid)" in res.stdout
+    assert len(list((rd / "corrupt").glob(f"mesh-{gid}.h5.*"))) == 1
+    assert _status(cli, rd)["jobs_damaged"] == 0
+
+
+def test_stray_files_in_results_are_ignored_by_every_reader(
+    cli: Cli, template: Path, tmp_path: Path
+) -> None:
+    rd = _stored_run(tmp_path, cli)
+    res_dir = rd / "results"
+    (res_dir / "notes.txt").write_text("mine")
+    (res_dir / "job-zz.parquet").write_bytes(b"PAR1 not a result PAR1")
+    (res_dir / "job-0123456789abcdef.parquet.bak").write_bytes(b"x")
+    (res_dir / "old").mkdir()
+    s = _status(cli, rd)
+    assert (s["jobs_done"], s["stray_files"], s["jobs_damaged"]) == (4, 4, 0)
+    assert len(read_results(rd)) == 4 * 6
+    res = _run_with_fault(rd)
+    assert res.returncode == 0 and "4 already done, 0 run" in res.stdout, res.stderr

@@ -277,16 +277,63 @@ def test_kill9_mid_shard_then_resume(tmp_path: Path) -> None:
         assert (rd / "results" / name).stat().st_mtime_ns == mtime
     assert not list((rd / "tmp").iterdir())  # the killed runner's temporaries were cleaned
 
-    # A damaged result file: status fails with one line naming it; a rerun redoes that job.
+    # A damaged result file: status counts it (naming it); a rerun redoes that job.
     victim = sorted((rd / "results").glob("*.parquet"))[4]
     victim.write_bytes(victim.read_bytes()[:-40])
-    res = subprocess.run([*WS, "status", str(rd)], capture_output=True, text=True)
-    assert res.returncode == 2 and len(res.stderr.strip().splitlines()) == 1
-    assert str(victim) in res.stderr
+    s = _status_json(rd)
+    assert (s["jobs_done"], s["jobs_damaged"]) == (17, 1) and str(victim) in s["damaged_example"]
     res = _run(rd, "--workers", "1")
     assert res.returncode == 0 and "17 already done, 1 run" in res.stdout
     assert len(list((rd / "corrupt").iterdir())) == 1
     _assert_each_job_once(rd)
+
+    # A fields file overwritten with random bytes of the same size: found, moved, redone.
+    fields = sorted((rd / "fields").glob("[0-9a-f]*.h5"))[2]
+    size = fields.stat().st_size
+    fields.write_bytes(np.random.default_rng(0).integers(0, 256, size, dtype=np.uint8).tobytes())
+    s = _status_json(rd)
+    assert (s["jobs_done"], s["jobs_damaged"]) == (17, 1) and str(fields) in s["damaged_example"]
+    res = _run(rd, "--workers", "1")
+    assert res.returncode == 0 and "17 already done, 1 run (1 converged)" in res.stdout
+    assert len(list((rd / "corrupt").glob(f"{fields.name}.*"))) == 1
+    assert (_assert_each_job_once(rd)["failure_class"] == "converged").all()
+    assert _status_json(rd)["jobs_damaged"] == 0
+
+
+def _status_json(rd: Path) -> dict:
+    res = subprocess.run([*WS, "status", str(rd), "--json"], capture_output=True, text=True)
+    assert res.returncode == 0 and res.stderr == "", res.stderr
+    return json.loads(res.stdout)
+
+
+@needs_solve
+@pytest.mark.fem
+@pytest.mark.slow
+def test_materials_change_recomputes_the_stale_jobs_with_the_solver(tmp_path: Path) -> None:
+    """generate --force with other stiff-skin values: only the stiff jobs are redone, and
+    their stresses change; the job ids stay."""
+    rd = _make_run(tmp_path, "stale")
+    assert _run(rd, "--workers", "2").returncode == 0
+    before = read_results(rd).set_index("job_id")
+    sweep = json.loads(json.dumps(SWEEP))
+    sweep["shapes"] = {"cylindrical": SWEEP["shapes"]["cylindrical"]}
+    sweep["materials"] = {"skin_types": {"stiff": {"c_kPa": 85.2}, "soft": {}, "normal": {}}}
+    yml = tmp_path / "stiffer.yaml"
+    yml.write_text(yaml.safe_dump(sweep))
+    gen = subprocess.run(
+        [*WS, "generate", str(yml), "--out", str(rd), "--force"], capture_output=True, text=True
+    )
+    assert gen.returncode == 0 and "stored results: 3 stale" in gen.stdout, gen.stderr
+    s = _status_json(rd)
+    assert (s["jobs_done"], s["jobs_stale"], s["jobs_pending"]) == (6, 3, 3)
+    res = _run(rd, "--workers", "2")
+    assert res.returncode == 0 and "6 already done, 3 run (3 converged)" in res.stdout
+    after = read_results(rd).set_index("job_id")
+    assert sorted(after.index) == sorted(before.index)
+    stiff = after["skin_type"] == "stiff"
+    p99 = "p99_von_mises_kPa"
+    assert (after.loc[stiff, p99] != before.loc[after.index[stiff], p99]).all()
+    assert (after.loc[~stiff, p99] == before.loc[after.index[~stiff], p99]).all()
 
 
 @needs_solve

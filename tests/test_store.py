@@ -393,3 +393,38 @@ def test_stage_field_types_pinned() -> None:
     ints = {k for k, t in STAGE_FIELDS.items() if t == pa.int64()}
     assert ints == {"newton_iterations", "n_penetrating", "dofs", "cells"}
     assert all(t == pa.float64() for k, t in STAGE_FIELDS.items() if k not in ints)
+
+
+def test_fingerprint_covers_what_determines_a_result(run_dir: Path) -> None:
+    """Each material value of the job's own skin type, the subcutis, every stage and solver
+    setting change the fingerprint; another skin type's values, the analysis settings and the
+    sweep's name do not; the job id never does."""
+    from woundsweep.sweep.grid import parse_sweep
+    from woundsweep.sweep.identity import result_fingerprint
+
+    run = load_run(run_dir)
+    job = run.manifest[run.manifest["skin_type"] == "stiff"].iloc[0]
+    doc = {"grid": dict(run.sweep.grid), "shapes": dict(run.sweep.shapes)}
+    base = result_fingerprint(parse_sweep(doc), job)
+    assert len(base) == 64 and base == result_fingerprint(run.sweep, job)
+
+    def fp(section: str, value: dict) -> str:
+        return result_fingerprint(parse_sweep({**doc, section: value}), job)
+
+    changed = [
+        fp("materials", {"skin_types": {"stiff": {"c_kPa": 42.7}, "soft": {}}}),
+        fp("materials", {"skin_types": {"stiff": {"mu_kPa": [35.6, 11.8, 11.9]}, "soft": {}}}),
+        fp("materials", {"skin_types": {"stiff": {"tsf": 1.06}, "soft": {}}}),
+        fp("materials", {"subcutis": {"K_kPa": 51}}),
+        fp("stages", {"closure_load": "follower"}),
+        fp("stages", {"contact_penalty_GPa": [1, 5, 50]}),
+        fp("stages", {"closure_zone": {"y_fraction": 0.5}}),
+        fp("solver", {"quadrature_degree": 2}),
+        fp("solver", {"rtol": 1e-9}),
+    ]
+    assert base not in changed and len(set(changed)) == len(changed)
+    assert fp("materials", {"skin_types": {"stiff": {}, "soft": {"c_kPa": 99.0}}}) == base
+    assert fp("analysis", {"max_depth": 3}) == base
+    assert result_fingerprint(parse_sweep({**doc, "name": "other"}), job) == base
+    other = run.manifest[run.manifest["skin_type"] == "soft"].iloc[0]
+    assert result_fingerprint(run.sweep, other) != base

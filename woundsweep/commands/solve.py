@@ -15,6 +15,7 @@ import click
 from ..errors import SolverError
 from ..fsutil import check_output_file
 from ..schema import ExitCode, StageResult, StageStatus, parse_stage_range
+from ..sweep.grid import load_run
 
 __all__ = ["cmd"]
 
@@ -64,6 +65,7 @@ def cmd(run_dir: Path, job_index: int, stages_text: str, out: Path | None) -> No
             check_output_file(out)
         except ValueError as err:
             raise SolverError(f"--out {err}") from None
+    load_run(run_dir)  # a bad run directory fails here, before DOLFINx is imported
     from ..model.job import NotConvergedError, StageRecord, solve_job
 
     logging.getLogger().setLevel(logging.WARNING)  # FFCx/cffi log every compile at INFO

@@ -428,6 +428,15 @@ def run_dir_cases() -> list[Case]:
     ]
     for name, argv in solve_mesh:
         cases.append(Case(name, _in_run(*argv)))
+    analyze = [
+        ("analyze-param-nan", ["analyze", "RUN", "--param", "learning_rate=nan"]),
+        ("analyze-param-junk", ["analyze", "RUN", "--param", "junk"]),
+        ("analyze-quantiles-0", ["analyze", "RUN", "--quantiles", "0"]),
+        ("analyze-no-results", ["analyze", "RUN"]),
+        ("analyze-not-a-run", ["analyze", "RUN/nosuch"]),
+    ]
+    for name, argv in analyze:
+        cases.append(Case(name, _in_run(*argv)))
     return cases
 
 

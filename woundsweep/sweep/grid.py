@@ -442,7 +442,11 @@ def expand(sweep: Sweep, max_jobs: int = MAX_JOBS) -> pd.DataFrame:
     job_keys = [*GEOMETRY_KEYS, "skin_type", "orientation_deg"]
     records = df[job_keys].to_dict("records")
     df["job_id"] = [canonical_hash(r) for r in records]
-    df["geometry_id"] = [canonical_hash({k: r[k] for k in GEOMETRY_KEYS}) for r in records]
+    # One hash per geometry, not per job (the skin type x orientation jobs share it).
+    codes = df.groupby(list(GEOMETRY_KEYS), dropna=False, sort=False).ngroup().to_numpy()
+    first = pd.Series(np.arange(len(df))).groupby(codes).first().to_numpy()
+    gids = np.array([canonical_hash({k: records[i][k] for k in GEOMETRY_KEYS}) for i in first])
+    df["geometry_id"] = gids[codes]
     df["job_index"] = np.arange(len(df), dtype=np.int64)
     if df["job_id"].duplicated().any():
         raise SweepError(sweep.path, "grid", "duplicate jobs (two axis values give the same job)")

@@ -428,6 +428,9 @@ def run_dir_cases() -> list[Case]:
     ]
     for name, argv in solve_mesh:
         cases.append(Case(name, _in_run(*argv)))
+    for sub in ("results", "slurm", "fields"):
+        cmd = ["slurm", "RUN", "--shards", "2"] if sub == "slurm" else ["run", "RUN"]
+        cases.append(Case(f"{cmd[0]}-{sub}-is-a-file", _in_run(*cmd, prep=_write(sub, b"x"))))
     analyze = [
         ("analyze-param-nan", ["analyze", "RUN", "--param", "learning_rate=nan"]),
         ("analyze-param-junk", ["analyze", "RUN", "--param", "junk"]),
@@ -676,3 +679,15 @@ def test_stray_files_in_results_are_ignored_by_every_reader(
     assert len(read_results(rd)) == 4 * 6
     res = _run_with_fault(rd)
     assert res.returncode == 0 and "4 already done, 0 run" in res.stdout, res.stderr
+
+
+def test_generate_force_repairs_a_damaged_manifest(cli: Cli, template: Path, tmp_path: Path) -> None:
+    shutil.copytree(template, tmp_path / "run")
+    (tmp_path / "demo.yaml").write_text(yaml.safe_dump(DEMO))
+    _truncate_manifest(tmp_path / "run")
+    assert cli(["status", "run"], tmp_path).code == 2
+    res = cli(["generate", "demo.yaml", "--out", "run", "--force"], tmp_path)
+    assert res.code == 0 and "32 jobs written" in res.stdout, res.stderr
+    again = cli(["generate", "demo.yaml", "--out", "run"], tmp_path)
+    assert again.code == 0 and "nothing to do" in again.stdout
+    assert _status(cli, tmp_path / "run")["jobs_pending"] == 32

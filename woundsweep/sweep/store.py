@@ -43,6 +43,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from .. import __version__
+from ..errors import StoreError
 from ..fsutil import atomic_write
 from ..schema import FailureClass, StageStatus
 from ..solverfile import MESH_DATASETS, MESH_GROUP, SolverOutput, stage_group, stage_of_group
@@ -139,7 +140,11 @@ class Store:
         self.host = socket.gethostname()
 
     def ensure_dirs(self) -> None:
-        for d in (self.results_dir, self.fields_dir, self.logs_dir, self.tmp_dir):
+        dirs = (self.results_dir, self.fields_dir, self.logs_dir, self.tmp_dir)
+        for d in dirs:  # all checked before any is made: a refused run changes nothing
+            if d.exists() and not d.is_dir():
+                raise StoreError(f"{d}: exists and is not a directory (move it away)")
+        for d in dirs:
             d.mkdir(parents=True, exist_ok=True)
 
     def result_path(self, job_id: str) -> Path:

@@ -121,7 +121,8 @@ def main() -> int:
                 from woundsweep.sweep.store import JobOutcome, Store
 
                 # Store write alone, for one real result re-solved to a scratch file.
-                row = load_run(rd).manifest.iloc[int(jobs["job_index"].iloc[0])]
+                run = load_run(rd)
+                row = run.manifest.iloc[int(jobs["job_index"].iloc[0])]
                 out = tmp_path / "one.h5"
                 subprocess.run(
                     [*WS, "solve", str(rd), "--job", str(int(row["job_index"])), "--stages",
@@ -136,7 +137,7 @@ def main() -> int:
                     scratch.mkdir()
                     t0 = time.perf_counter()
                     for _ in range(5):
-                        Store(scratch).write_job(row.to_dict(), oc, (a, b), "final", "0/1")
+                        Store(scratch, run.sweep).write_job(row.to_dict(), oc, (a, b), "final", "0/1")
                     print(
                         f"  store write (rows + final fields + mesh): {(time.perf_counter() - t0) / 5 * 1000:.0f} ms/job"
                     )

@@ -137,7 +137,9 @@ def main() -> int:
                     scratch.mkdir()
                     t0 = time.perf_counter()
                     for _ in range(5):
-                        Store(scratch, run.sweep).write_job(row.to_dict(), oc, (a, b), "final", "0/1")
+                        Store(scratch, run.sweep).write_job(
+                            row.to_dict(), oc, (a, b), "final", "0/1"
+                        )
                     print(
                         f"  store write (rows + final fields + mesh): {(time.perf_counter() - t0) / 5 * 1000:.0f} ms/job"
                     )

@@ -674,11 +674,21 @@ def test_stray_files_in_results_are_ignored_by_every_reader(
     (res_dir / "job-zz.parquet").write_bytes(b"PAR1 not a result PAR1")
     (res_dir / "job-0123456789abcdef.parquet.bak").write_bytes(b"x")
     (res_dir / "old").mkdir()
+    os.mkfifo(res_dir / "job-0123456789abcdef.parquet")  # the store's name, not a file: no hang
     s = _status(cli, rd)
-    assert (s["jobs_done"], s["stray_files"], s["jobs_damaged"]) == (4, 4, 0)
+    assert (s["jobs_done"], s["stray_files"], s["jobs_damaged"]) == (4, 5, 0)
     assert len(read_results(rd)) == 4 * 6
     res = _run_with_fault(rd)
     assert res.returncode == 0 and "4 already done, 0 run" in res.stdout, res.stderr
+    # A named pipe under a manifest job's result name: corrupt, moved aside, redone; no hang.
+    victim = next(p for p in res_dir.glob("job-*.parquet") if p.is_file())
+    victim.unlink()
+    os.mkfifo(victim)
+    s = _status(cli, rd)
+    assert (s["jobs_done"], s["jobs_pending"]) == (3, 1)
+    res = _run_with_fault(rd)
+    assert res.returncode == 0 and "3 already done, 1 run" in res.stdout, res.stderr
+    assert victim.is_file()
 
 
 def test_generate_force_repairs_a_damaged_manifest(cli: Cli, template: Path, tmp_path: Path) -> None:

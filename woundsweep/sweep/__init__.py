@@ -1,7 +1,8 @@
 """The sweep layer: sweep files and the manifest, shards, the result store, the runner, SLURM.
 
 Modules: `grid` (sweep loading, validation, expansion; `load_run`), `rules` (exclusion rules),
-`shards` (the deterministic partition), `store` (the result store and its writes),
+`shards` (the deterministic partition), `identity` (result fingerprints and file
+checksums), `store` (the result store and its writes),
 `results` (the result schema, validation, `read_results`), `runner` (``woundsweep run``) with
 `process`, `classify` and `jitlock`, and `slurm` (batch scripts). Names are re-exported
 lazily, so importing the package stays cheap.

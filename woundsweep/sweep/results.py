@@ -139,6 +139,8 @@ def validate_result_file(
     file is missing, has another size, or (``verify_files``) another sha256 than recorded.
     The record's ``_table`` holds the file's table.
     """
+    if not path.is_file():  # a named pipe would block the reader
+        raise StoreError(f"{path}: corrupt result file (not a regular file)")
     try:
         table = pq.read_table(path, page_checksum_verification=True)
     except Exception as err:  # pyarrow raises OSError, ArrowInvalid, ... for damaged files
@@ -199,7 +201,7 @@ def check_result(
 ) -> ResultCheck:
     """Sort one result file: corrupt (the Parquet file), stale (another result format or
     another fingerprint than ``fingerprint``), damaged (its fields or mesh file), or done."""
-    footer = _footer(path)
+    footer = _footer(path) if path.is_file() else None
     if footer is not None and footer.get("format") != FORMAT_VERSION:
         return ResultCheck("stale", f"written in result format {footer.get('format')!r}")
     try:

@@ -691,7 +691,9 @@ def test_stray_files_in_results_are_ignored_by_every_reader(
     assert victim.is_file()
 
 
-def test_generate_force_repairs_a_damaged_manifest(cli: Cli, template: Path, tmp_path: Path) -> None:
+def test_generate_force_repairs_a_damaged_manifest(
+    cli: Cli, template: Path, tmp_path: Path
+) -> None:
     shutil.copytree(template, tmp_path / "run")
     (tmp_path / "demo.yaml").write_text(yaml.safe_dump(DEMO))
     _truncate_manifest(tmp_path / "run")

@@ -84,16 +84,17 @@ def generate(
         raise StoreError(f"{rd}: exists and is not a directory")
     old = _existing_sweep(rd)
     new = json.loads(json.dumps(sweep.resolved() | {"path": None}))
-    if old is not None and not force:
-        old = json.loads(json.dumps(old | {"path": None}))
-        if old != new:
+    if old is not None:
+        same = json.loads(json.dumps(old | {"path": None})) == new
+        if same and _manifest_matches(rd / "manifest.parquet", manifest):
+            return len(manifest), False
+        if not force and not same:
             raise StoreError(
                 f"{rd}: already holds a run made from a different sweep (use --force to replace "
                 "its manifest; results are kept)"
             )
-        if _manifest_matches(rd / "manifest.parquet", manifest):
-            return len(manifest), False
-        raise StoreError(
+        if not force:
+            raise StoreError(
             f"{rd / 'manifest.parquet'}: missing, damaged or not the expansion of "
             f"{rd / 'sweep.yaml'} (use --force to rewrite it; results are kept)"
         )

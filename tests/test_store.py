@@ -257,7 +257,7 @@ def test_truncated_fields_file_is_detected(run_dir: Path) -> None:
     fpath = run_dir / "fields" / f"{jid}.h5"
     fpath.write_bytes(fpath.read_bytes()[:1000])
     st = store.job_state(jid, (1, 6))
-    assert st.state == "corrupt" and "fields" in st.reason
+    assert st.state == "damaged" and "fields" in st.reason
 
 
 def test_truncated_result_fails_analysis_reads_and_status_counts_it(run_dir: Path) -> None:

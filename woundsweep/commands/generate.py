@@ -95,9 +95,9 @@ def generate(
             )
         if not force:
             raise StoreError(
-            f"{rd / 'manifest.parquet'}: missing, damaged or not the expansion of "
-            f"{rd / 'sweep.yaml'} (use --force to rewrite it; results are kept)"
-        )
+                f"{rd / 'manifest.parquet'}: missing, damaged or not the expansion of "
+                f"{rd / 'sweep.yaml'} (use --force to rewrite it; results are kept)"
+            )
     try:
         rd.mkdir(parents=True, exist_ok=True)
         atomic_write(rd / "manifest.parquet", lambda tmp: manifest.to_parquet(tmp, index=False))

@@ -37,6 +37,7 @@ __all__ = [
     "FilesDamaged",
     "ResultCheck",
     "StoreScan",
+    "check_files",
     "check_result",
     "content_digest",
     "read_results",
@@ -164,22 +165,30 @@ def validate_result_file(
     found = table.column("stage").to_pylist()
     if found != list(range(lo, hi + 1)):
         raise StoreError(f"{path}: expected stages {lo}-{hi}, found {found}")
+    check_files(path, meta, run_dir, verify=verify_files, memo=memo)
+    meta["_table"] = table
+    return meta
+
+
+def check_files(
+    path: Path, meta: dict[str, Any], run_dir: Path, *, verify: bool, memo: dict | None = None
+) -> None:
+    """`FilesDamaged` unless the fields and mesh files of result ``path`` (footer ``meta``)
+    exist with the recorded size and, with ``verify``, the recorded sha256."""
     ff = meta.get("fields_file") or ""
     if ff:
         fpath = run_dir / "fields" / ff
         if not fpath.is_file() or fpath.stat().st_size != meta.get("fields_bytes"):
             raise FilesDamaged(f"{path}: its fields file {fpath} is missing or truncated")
-        if verify_files and file_sha256(fpath, memo) != meta.get("fields_sha256"):
+        if verify and file_sha256(fpath, memo) != meta.get("fields_sha256"):
             raise FilesDamaged(f"{path}: its fields file {fpath} is damaged (sha256 differs)")
     mf = meta.get("mesh_file") or ""
     if mf:
         mpath = run_dir / "fields" / mf
         if not mpath.is_file():
             raise FilesDamaged(f"{path}: its mesh file {mpath} is missing")
-        if verify_files and file_sha256(mpath, memo) != meta.get("mesh_sha256"):
+        if verify and file_sha256(mpath, memo) != meta.get("mesh_sha256"):
             raise FilesDamaged(f"{path}: its mesh file {mpath} is damaged (sha256 differs)")
-    meta["_table"] = table
-    return meta
 
 
 class ResultCheck(NamedTuple):
@@ -206,13 +215,15 @@ def check_result(
         return ResultCheck("stale", f"written in result format {footer.get('format')!r}")
     try:
         meta = validate_result_file(path, job_id, run_dir, verify_files=False)
+    except FilesDamaged as err:  # the Parquet file is whole: its fields or mesh file is not
+        return ResultCheck("damaged", str(err), _footer(path))
     except StoreError as err:
         return ResultCheck("corrupt", str(err))
     if fingerprint is not None and meta.get("fingerprint") != fingerprint:
         return ResultCheck("stale", "computed with other settings (fingerprint differs)", meta)
     if verify_files:
         try:
-            validate_result_file(path, job_id, run_dir, verify_files=True, memo=memo)
+            check_files(path, meta, run_dir, verify=True, memo=memo)
         except FilesDamaged as err:
             return ResultCheck("damaged", str(err), meta)
     return ResultCheck("done", "", meta)

@@ -82,7 +82,7 @@ def cmd(
 
     try:
         loaded = load_model(model, scheme)
-        quantiles = int(loaded.meta["quantiles"])
+        quantiles, scheme_name = int(loaded.meta["quantiles"]), str(loaded.meta["scheme"])
     except (AttributeError, TypeError, KeyError, ValueError) as err:  # e.g. metadata `null`
         raise AnalysisError(f"{model}: malformed model metadata ({type(err).__name__})") from None
     params = {
@@ -95,13 +95,13 @@ def cmd(
     if as_json:
         out = {
             "model": str(loaded.path),
-            "scheme": loaded.meta["scheme"],
+            "scheme": scheme_name,
             "quantiles": q,
             "predictions": [p._asdict() for p in preds],
         }
         click.echo(json.dumps(out, indent=1))
         return
-    click.echo(f"model: {loaded.path} ({loaded.meta['scheme']} split, {q} quantiles)")
+    click.echo(f"model: {loaded.path} ({scheme_name} split, {q} quantiles)")
     for p in preds:
         lo, hi = p.stress_range_kPa
         # The end classes are open: their outer edge is only the smallest / largest training value.

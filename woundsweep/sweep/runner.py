@@ -24,7 +24,6 @@ import errno
 import os
 import signal
 import socket
-import subprocess
 import sys
 import time
 from collections import deque
@@ -38,9 +37,10 @@ from ..errors import StoreError, WoundsweepError
 from ..faults import ATTEMPT_ENV
 from ..schema import FailureClass
 from .classify import TRANSIENT_CLASSES, classify
+from .forkserver import ForkServer
 from .grid import load_run
 from .jitlock import break_lock, clear_stale_jit_locks, jit_cache_dir, lock_state
-from .process import Attempt, Job, kill_group, preexec, tree_rss
+from .process import Attempt, Job, kill_group, tree_rss
 from .shards import Shard, estimate_cost, shard_jobs
 from .store import JobOutcome, Store
 
@@ -97,6 +97,7 @@ class _Runner:
         if opts.workers > 1:  # K processes on K cores: threads inside each would oversubscribe
             for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
                 self.env[var] = "1"
+        self.server = ForkServer(self.env, str(run_dir))  # forks the attempts' processes
 
     # -- starting ------------------------------------------------------------------------
     def start(self, job: Job) -> None:
@@ -124,16 +125,7 @@ class _Runner:
             as_limit = None
             if self.opts.max_memory_bytes is not None:
                 as_limit = 2 * self.opts.max_memory_bytes + 2**30
-            proc = subprocess.Popen(
-                cmd,
-                stdin=subprocess.DEVNULL,
-                stdout=fh,
-                stderr=subprocess.STDOUT,
-                env=env,
-                start_new_session=True,
-                preexec_fn=preexec(as_limit),
-                close_fds=True,
-            )
+        proc = self.server.spawn(cmd[3:], env, log, as_limit)
         now = time.time()
         self.running[proc.pid] = Attempt(job, proc, out, offset, now, now + limit)
 
@@ -144,7 +136,7 @@ class _Runner:
         now = time.time()
         for pid, att in list(self.running.items()):
             try:
-                wpid, status, usage = os.wait4(pid, os.WNOHANG)
+                wpid, status, usage = self.server.wait4(pid)
             except ChildProcessError:
                 wpid, status, usage = pid, 0, None
             if wpid == pid:
@@ -170,10 +162,7 @@ class _Runner:
     def kill_all(self) -> None:
         for pid, att in list(self.running.items()):
             kill_group(pid)
-            try:
-                os.waitpid(pid, 0)
-            except ChildProcessError:
-                pass
+            self.server.wait(pid)
             att.proc.returncode = -9
             att.out.unlink(missing_ok=True)
         self.running.clear()
@@ -348,6 +337,7 @@ def run_shard(run_dir: str | Path, opts: RunOptions) -> RunSummary:
         raise
     finally:
         signal.signal(signal.SIGTERM, old_term)
+        runner.server.close()
         bar.close()
     return RunSummary(
         jobs=len(shard),

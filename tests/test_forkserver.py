@@ -232,3 +232,29 @@ def test_runner_stopped_takes_its_server_and_jobs(tmp_path: Path, sig: int) -> N
         time.sleep(0.05)
     assert not _solve_processes(rd)
     assert not list((rd / "results").glob("*.parquet"))
+
+
+def test_attempt_killed_with_its_server_is_retried_by_a_new_server(tmp_path: Path) -> None:
+    """The runner's server dies while attempt 1 hangs: that attempt ends `crashed` (killed by
+    SIGKILL), a new server starts, and attempt 2 solves the job."""
+    rd = _make_run(tmp_path, "respawn")
+    cmd = [*WS, "run", str(rd), "--no-progress", "--stages", "1-1", "--shard", "0/9"]
+    env = dict(os.environ, WOUNDSWEEP_FAULT="hang#1")
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env, text=True)
+    (job,) = _jobs_of(rd, 1)
+    (first,) = [p for p in _solve_processes(rd) if p != job]
+    os.kill(first, signal.SIGKILL)
+    out, err = proc.communicate(timeout=600)
+    assert proc.returncode == 0, err
+    assert "1 run (1 converged), 2 attempts" in out
+    assert err.strip().splitlines() == [
+        "woundsweep run: the fork server ended (returncode -9); 1 running attempt(s) killed"
+        " with it; the next attempt starts a new one"
+    ]
+    row = pd.read_parquet(rd / "results").iloc[0]
+    assert (row["failure_class"], row["attempts"]) == ("converged", 2)
+    log = next((rd / "logs").glob("*.log")).read_text()
+    assert "fork server ended; this attempt was killed" in log
+    assert "attempt 1 ended: crashed: killed by SIGKILL" in log
+    assert "attempt 2 ended: converged" in log
+    assert not _solve_processes(rd)

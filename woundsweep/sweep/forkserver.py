@@ -46,6 +46,7 @@ import subprocess
 import sys
 import time
 import traceback
+import warnings
 from pathlib import Path
 from typing import Any, NamedTuple
 
@@ -165,11 +166,13 @@ class ForkServer:
         usage = Usage(float(msg["utime"]), float(msg["stime"]), int(msg["maxrss"]))
         self.exited[pid] = (int(msg["status"]), usage)
 
-    def _stop(self) -> None:
-        """The server is gone or given up on: its running children end as SIGKILLed."""
+    def _stop(self) -> int | None:
+        """The server is gone or given up on: its running children end as SIGKILLed.
+        Returns the server's exit status (as Popen's returncode)."""
+        code = None
         if self.proc is not None:
             kill_group(self.proc.pid)
-            self.proc.wait()
+            code = self.proc.wait()
         if self.sock is not None:
             self.sock.close()
         for pid, log in self.children.items():
@@ -182,6 +185,7 @@ class ForkServer:
             self.exited[pid] = (signal.SIGKILL, None)  # a wait status: killed by SIGKILL
         self.children.clear()
         self.proc, self.sock = None, None
+        return code
 
     def spawn(self, args: list[str], env: dict[str, str], log: Path, as_limit: int | None) -> Child:
         """Start ``woundsweep ARGS`` in a forked child; stdout and stderr append to ``log``."""
@@ -218,7 +222,13 @@ class ForkServer:
     def wait4(self, pid: int) -> tuple[int, int, Usage | None]:
         """Like ``os.wait4(pid, os.WNOHANG)``: ``(pid, status, usage)`` once ended, else 0s."""
         if pid not in self.exited and self.sock is not None and self._messages(0.0) is None:
-            self._stop()
+            running = len(self.children)
+            code = self._stop()
+            print(
+                f"woundsweep run: the fork server ended (returncode {code}); {running} running"
+                " attempt(s) killed with it; the next attempt starts a new one",
+                file=sys.stderr,
+            )
         if pid in self.exited:
             status, usage = self.exited.pop(pid)
             return pid, status, usage
@@ -324,7 +334,23 @@ def _child(req: dict[str, Any], server_pid: int, server_fds: tuple[int, ...]) ->
 
 
 def _send(sock: socket.socket, msg: dict[str, Any]) -> None:
+    """Send one message; raises ``OSError`` once the runner is gone."""
     sock.sendall(json.dumps(msg).encode() + b"\n")
+
+
+def _reap(sock: socket.socket, children: set[int]) -> None:
+    """Reap every ended child, kill the strays of its group, report its status and rusage."""
+    while children:
+        try:
+            pid, status, ru = os.wait4(-1, os.WNOHANG)
+        except ChildProcessError:
+            return
+        if pid == 0:
+            return
+        children.discard(pid)
+        kill_group(pid)
+        report = {"exit": pid, "status": status, "utime": ru.ru_utime, "stime": ru.ru_stime}
+        _send(sock, {**report, "maxrss": ru.ru_maxrss})
 
 
 def serve(fd: int) -> None:
@@ -332,64 +358,55 @@ def serve(fd: int) -> None:
     sock = socket.socket(fileno=fd)
     set_process_name(SERVER_NAME)
     failed = _preload()
+    _reset_signals()  # PETSc's handlers would turn a broken pipe into an MPI_Abort
+    # Python >= 3.12 warns at each fork of a process with threads; the ones here are MPI's,
+    # OpenBLAS' and jemalloc's, which keep no lock a child needs across the fork (OpenBLAS and
+    # jemalloc have fork handlers), and a test forks a real solve to show the child works.
+    warnings.filterwarnings("ignore", ".*fork.*", DeprecationWarning)
     wake_r, wake_w = os.pipe()
     os.set_blocking(wake_r, False)
     os.set_blocking(wake_w, False)
     signal.set_wakeup_fd(wake_w)
     signal.signal(signal.SIGCHLD, lambda signum, frame: None)  # wakes the select
-    _send(sock, {"ready": True, "pid": os.getpid(), "preload_failed": failed})
     me, fds = os.getpid(), (fd, wake_r, wake_w)
     children: set[int] = set()
     buf = b""
-    while True:
-        ready = select.select([sock, wake_r], [], [])[0]
-        if wake_r in ready:
-            while True:
-                try:
-                    if not os.read(wake_r, 512):
+    try:
+        _send(sock, {"ready": True, "pid": me, "preload_failed": failed})
+        while True:
+            ready = select.select([sock, wake_r], [], [])[0]
+            if wake_r in ready:
+                while True:
+                    try:
+                        if not os.read(wake_r, 512):
+                            break
+                    except BlockingIOError:
                         break
-                except BlockingIOError:
-                    break
-        while children:
-            try:
-                pid, status, ru = os.wait4(-1, os.WNOHANG)
-            except ChildProcessError:
-                break
-            if pid == 0:
-                break
-            children.discard(pid)
-            kill_group(pid)  # strays left in the job's group
-            _send(
-                sock,
-                {
-                    "exit": pid,
-                    "status": status,
-                    "utime": ru.ru_utime,
-                    "stime": ru.ru_stime,
-                    "maxrss": ru.ru_maxrss,
-                },
-            )
-        if sock not in ready:
-            continue
-        data = sock.recv(1 << 16)
-        if not data:
-            break
-        *lines, buf = (buf + data).split(b"\n")
-        for line in lines:
-            req = json.loads(line)
-            sys.stdout.flush()
-            sys.stderr.flush()
-            try:
-                pid = os.fork()
-            except OSError as err:
-                _send(sock, {"id": req["id"], "error": f"fork failed: {err}"})
+            _reap(sock, children)
+            if sock not in ready:
                 continue
-            if pid == 0:
-                _child(req, me, fds)
-            children.add(pid)
-            _send(sock, {"id": req["id"], "pid": pid})
-    for pid in children:
-        kill_group(pid)
+            data = sock.recv(1 << 16)
+            if not data:
+                return
+            *lines, buf = (buf + data).split(b"\n")
+            for line in lines:
+                req = json.loads(line)
+                sys.stdout.flush()
+                sys.stderr.flush()
+                try:
+                    pid = os.fork()
+                except OSError as err:
+                    _send(sock, {"id": req["id"], "error": f"fork failed: {err}"})
+                    continue
+                if pid == 0:
+                    _child(req, me, fds)
+                children.add(pid)
+                _send(sock, {"id": req["id"], "pid": pid})
+    except OSError:
+        return  # the runner is gone
+    finally:
+        for pid in children:
+            kill_group(pid)
 
 
 if __name__ == "__main__":

@@ -3,7 +3,8 @@
 A job runs in a new session (its own process group) so that it is killed with everything it
 started. `preexec` sets, in the child, ``RLIMIT_AS`` (a backstop to the runner's resident
 memory poll, `tree_rss`, against allocations faster than the poll) and
-``PR_SET_PDEATHSIG`` = SIGKILL, so a runner killed with ``kill -9`` takes its jobs with it.
+``PR_SET_PDEATHSIG`` = SIGKILL, so a runner killed with ``kill -9`` takes its fork server
+with it, and the fork server its jobs (`woundsweep.sweep.forkserver` forks them).
 """
 
 from __future__ import annotations

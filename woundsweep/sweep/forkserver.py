@@ -236,6 +236,15 @@ class ForkServer:
             raise ChildProcessError(pid)
         return 0, 0, None
 
+    def wait_any(self, timeout: float) -> None:
+        """Sleep ``timeout`` s, or less: until a child's end is reported (or one is pending)."""
+        if self.exited:
+            return
+        if self.sock is None:
+            time.sleep(timeout)
+        else:
+            self._messages(timeout)  # if the server is gone, the next `wait4` says so
+
     def wait(self, pid: int, timeout: float = 10.0) -> None:
         """Wait (at most ``timeout`` s) until the server has reaped ``pid``."""
         deadline = time.monotonic() + timeout

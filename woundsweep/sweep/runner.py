@@ -315,7 +315,8 @@ def run_shard(run_dir: str | Path, opts: RunOptions) -> RunSummary:
                     runner.start(job)
                 else:
                     queue.append(job)
-            for att, status, usage in runner.poll():
+            finished = runner.poll()
+            for att, status, usage in finished:
                 outcome = runner.finish(att, status, usage)
                 if outcome is None:
                     queue.append(att.job)
@@ -331,7 +332,8 @@ def run_shard(run_dir: str | Path, opts: RunOptions) -> RunSummary:
                     failed += 1
                 bar.set_postfix(failed=failed, running=len(runner.running), refresh=False)
                 bar.update(1)
-            time.sleep(opts.poll_s)
+            if not finished:  # else start the next jobs at once
+                runner.server.wait_any(opts.poll_s)
     except BaseException:
         runner.kill_all()
         raise

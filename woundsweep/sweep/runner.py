@@ -1,10 +1,11 @@
-"""`woundsweep run`: every job in its own subprocess, with a timeout, a memory cap and retries.
+"""`woundsweep run`: every job in its own process, with a timeout, a memory cap and retries.
 
 One runner process drives a shard. It keeps up to K jobs running, each as
 ``woundsweep solve RUN_DIR --job N --stages A-B --out TMP.h5`` in its own process group,
 forked by the runner's fork server (`woundsweep.sweep.forkserver`, `woundsweep.sweep.process`),
-and polls them from a single thread (no threads: ``preexec_fn`` is only safe without them). A job is killed with its whole process group when
-it exceeds the wall-clock timeout or the memory cap. The cap is enforced two ways: the
+and polls them from a single thread (no threads: ``preexec_fn`` is only safe without them).
+A job is killed with its whole process group when it exceeds the wall-clock timeout or the
+memory cap. The cap is enforced two ways: the
 resident set of the job's process tree is polled and the group killed above ``--max-memory``
 (so the runner knows it was memory and says so); ``RLIMIT_AS`` is set at twice the cap plus
 1 GiB as a backstop against allocations faster than the poll (address space runs well above

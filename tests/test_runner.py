@@ -30,6 +30,7 @@ from woundsweep.sweep.results import read_results
 from woundsweep.sweep.shards import partition
 
 WS = [sys.executable, "-m", "woundsweep"]
+FORKSERVER = b"woundsweep.sweep.forkserver"
 needs_solve = pytest.mark.skipif(
     "solve" not in COMMANDS, reason="`woundsweep solve` is not registered in woundsweep/cli.py yet"
 )
@@ -73,7 +74,8 @@ def _run(
 
 
 def _solve_processes(rd: Path) -> list[int]:
-    """Pids of live `woundsweep solve` processes working on ``rd``."""
+    """Pids of live `woundsweep solve` processes working on ``rd``: a runner's fork server
+    for ``rd`` and the job processes it forked (their command line is the server's)."""
     pids = []
     for d in Path("/proc").iterdir():
         if d.name.isdigit():
@@ -81,7 +83,7 @@ def _solve_processes(rd: Path) -> list[int]:
                 cmd = (d / "cmdline").read_bytes().split(b"\0")
             except OSError:
                 continue
-            if b"solve" in cmd and str(rd).encode() in cmd:
+            if {b"solve", FORKSERVER} & set(cmd) and str(rd).encode() in cmd:
                 pids.append(int(d.name))
     return pids
 

@@ -19,6 +19,8 @@ import re
 import time
 from pathlib import Path
 
+from .process import SERVER_NAME
+
 __all__ = [
     "JIT_TIMEOUT_RE",
     "break_lock",
@@ -78,25 +80,33 @@ def _is_local_fs(path: Path) -> bool:
     return bool(fstype) and not any(t in fstype for t in _SHARED_FS)
 
 
-def _compiling_here(lock: Path, any_dolfinx: bool = False) -> bool:
-    """Could a process on this host be compiling the module of ``lock``?
+def _may_compile(proc: Path, stem: bytes, any_dolfinx: bool) -> bool:
+    """Could process ``proc`` (its /proc directory) be compiling the module ``stem``?
 
     A C compiler whose command line names the module, or (``any_dolfinx``) any process with
-    DOLFINx loaded: FFCx generates code in the Python process before the compiler runs.
+    DOLFINx loaded: FFCx generates code in the Python process before the compiler runs. A
+    runner's fork server has DOLFINx loaded but never compiles, so it does not count.
     """
-    stem = lock.stem.encode()
-    me = os.getpid()
-    for d in Path("/proc").iterdir():
-        if not d.name.isdigit() or int(d.name) == me:
-            continue
-        try:
-            if stem in (d / "cmdline").read_bytes():
-                return True
-            if any_dolfinx and b"libdolfinx" in (d / "maps").read_bytes():
-                return True
-        except OSError:
-            continue
-    return False
+    try:
+        if stem in (proc / "cmdline").read_bytes():
+            return True
+        return (
+            any_dolfinx
+            and (proc / "comm").read_text().strip() != SERVER_NAME
+            and b"libdolfinx" in (proc / "maps").read_bytes()
+        )
+    except OSError:
+        return False
+
+
+def _compiling_here(lock: Path, any_dolfinx: bool = False) -> bool:
+    """Could a process on this host be compiling the module of ``lock`` (`_may_compile`)?"""
+    me = str(os.getpid())
+    return any(
+        _may_compile(d, lock.stem.encode(), any_dolfinx)
+        for d in Path("/proc").iterdir()
+        if d.name.isdigit() and d.name != me
+    )
 
 
 def lock_state(lock: Path, stale_after_s: float) -> str:

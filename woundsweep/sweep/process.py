@@ -3,7 +3,8 @@
 A job runs in a new session (its own process group) so that it is killed with everything it
 started. `preexec` sets, in the child, ``RLIMIT_AS`` (a backstop to the runner's resident
 memory poll, `tree_rss`, against allocations faster than the poll) and
-``PR_SET_PDEATHSIG`` = SIGKILL, so a runner killed with ``kill -9`` takes its jobs with it.
+``PR_SET_PDEATHSIG`` = SIGKILL, so a runner killed with ``kill -9`` takes its fork server
+with it, and the fork server its jobs (`woundsweep.sweep.forkserver` forks them).
 """
 
 from __future__ import annotations
@@ -12,23 +13,31 @@ import ctypes
 import os
 import resource
 import signal
-import subprocess
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 __all__ = [
+    "JOB_NAME",
+    "SERVER_NAME",
     "Attempt",
+    "Child",
     "Job",
     "kill_group",
     "log_tail",
     "preexec",
+    "set_process_name",
     "signal_name",
     "tree_rss",
 ]
 
+# /proc/PID/comm of the fork server (`woundsweep.sweep.forkserver`) and of the job processes
+# it forks: what ps shows, and how `jitlock` tells the server, which never compiles, apart.
+SERVER_NAME = "ws-forkserver"
+JOB_NAME = "ws-job"
 _PR_SET_PDEATHSIG = 1
+_PR_SET_NAME = 15
 _PAGE = os.sysconf("SC_PAGE_SIZE")
 _LIBC = ctypes.CDLL(None, use_errno=True)  # resolved now, not in the forked child
 
@@ -54,11 +63,19 @@ class Job:
 
 
 @dataclass
+class Child:
+    """A job attempt's process (the leader of its group) and, once reaped, its wait status."""
+
+    pid: int
+    returncode: int | None = None
+
+
+@dataclass
 class Attempt:
     """One running (or just ended) attempt of a job: its process and what the runner saw."""
 
     job: Job
-    proc: subprocess.Popen[bytes]
+    proc: Child
     out: Path
     log_offset: int
     started: float
@@ -77,6 +94,11 @@ def preexec(as_limit: int | None) -> Callable[[], None]:
         _LIBC.prctl(_PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
 
     return fn
+
+
+def set_process_name(name: str) -> None:
+    """Set this process's ``/proc/PID/comm`` (what ps and top show; at most 15 bytes)."""
+    _LIBC.prctl(_PR_SET_NAME, ctypes.c_char_p(name.encode()[:15]), 0, 0, 0)
 
 
 def tree_rss(pid: int) -> int:

@@ -1,10 +1,11 @@
-"""`woundsweep run`: every job in its own subprocess, with a timeout, a memory cap and retries.
+"""`woundsweep run`: every job in its own process, with a timeout, a memory cap and retries.
 
 One runner process drives a shard. It keeps up to K jobs running, each as
-``python -m woundsweep solve RUN_DIR --job N --stages A-B --out TMP.h5`` in its own process
-group (`woundsweep.sweep.process`), and polls them from a single thread (no threads:
-``preexec_fn`` is only safe without them). A job is killed with its whole process group when
-it exceeds the wall-clock timeout or the memory cap. The cap is enforced two ways: the
+``woundsweep solve RUN_DIR --job N --stages A-B --out TMP.h5`` in its own process group,
+forked by the runner's fork server (`woundsweep.sweep.forkserver`, `woundsweep.sweep.process`),
+and polls them from a single thread (no threads: ``preexec_fn`` is only safe without them).
+A job is killed with its whole process group when it exceeds the wall-clock timeout or the
+memory cap. The cap is enforced two ways: the
 resident set of the job's process tree is polled and the group killed above ``--max-memory``
 (so the runner knows it was memory and says so); ``RLIMIT_AS`` is set at twice the cap plus
 1 GiB as a backstop against allocations faster than the poll (address space runs well above
@@ -24,7 +25,6 @@ import errno
 import os
 import signal
 import socket
-import subprocess
 import sys
 import time
 from collections import deque
@@ -38,9 +38,10 @@ from ..errors import StoreError, WoundsweepError
 from ..faults import ATTEMPT_ENV
 from ..schema import FailureClass
 from .classify import TRANSIENT_CLASSES, classify
+from .forkserver import ForkServer
 from .grid import load_run
 from .jitlock import break_lock, clear_stale_jit_locks, jit_cache_dir, lock_state
-from .process import Attempt, Job, kill_group, preexec, tree_rss
+from .process import Attempt, Job, kill_group, tree_rss
 from .shards import Shard, estimate_cost, shard_jobs
 from .store import JobOutcome, Store
 
@@ -97,6 +98,7 @@ class _Runner:
         if opts.workers > 1:  # K processes on K cores: threads inside each would oversubscribe
             for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
                 self.env[var] = "1"
+        self.server = ForkServer(self.env, str(run_dir))  # forks the attempts' processes
 
     # -- starting ------------------------------------------------------------------------
     def start(self, job: Job) -> None:
@@ -124,16 +126,7 @@ class _Runner:
             as_limit = None
             if self.opts.max_memory_bytes is not None:
                 as_limit = 2 * self.opts.max_memory_bytes + 2**30
-            proc = subprocess.Popen(
-                cmd,
-                stdin=subprocess.DEVNULL,
-                stdout=fh,
-                stderr=subprocess.STDOUT,
-                env=env,
-                start_new_session=True,
-                preexec_fn=preexec(as_limit),
-                close_fds=True,
-            )
+        proc = self.server.spawn(cmd[3:], env, log, as_limit)
         now = time.time()
         self.running[proc.pid] = Attempt(job, proc, out, offset, now, now + limit)
 
@@ -144,7 +137,7 @@ class _Runner:
         now = time.time()
         for pid, att in list(self.running.items()):
             try:
-                wpid, status, usage = os.wait4(pid, os.WNOHANG)
+                wpid, status, usage = self.server.wait4(pid)
             except ChildProcessError:
                 wpid, status, usage = pid, 0, None
             if wpid == pid:
@@ -170,10 +163,7 @@ class _Runner:
     def kill_all(self) -> None:
         for pid, att in list(self.running.items()):
             kill_group(pid)
-            try:
-                os.waitpid(pid, 0)
-            except ChildProcessError:
-                pass
+            self.server.wait(pid)
             att.proc.returncode = -9
             att.out.unlink(missing_ok=True)
         self.running.clear()
@@ -327,7 +317,8 @@ def run_shard(run_dir: str | Path, opts: RunOptions) -> RunSummary:
                     runner.start(job)
                 else:
                     queue.append(job)
-            for att, status, usage in runner.poll():
+            finished = runner.poll()
+            for att, status, usage in finished:
                 outcome = runner.finish(att, status, usage)
                 if outcome is None:
                     queue.append(att.job)
@@ -343,12 +334,14 @@ def run_shard(run_dir: str | Path, opts: RunOptions) -> RunSummary:
                     failed += 1
                 bar.set_postfix(failed=failed, running=len(runner.running), refresh=False)
                 bar.update(1)
-            time.sleep(opts.poll_s)
+            if not finished:  # else start the next jobs at once
+                runner.server.wait_any(opts.poll_s)
     except BaseException:
         runner.kill_all()
         raise
     finally:
         signal.signal(signal.SIGTERM, old_term)
+        runner.server.close()
         bar.close()
     return RunSummary(
         jobs=len(shard),

@@ -23,7 +23,8 @@ __all__ = ["calibrate", "coverage", "half_width", "half_widths"]
 def half_width(scores: Sequence[float] | np.ndarray, level: float) -> float:
     """The conformal half-width of ``scores`` at ``level`` in (0, 1); ``inf`` if too few."""
     s = np.sort(np.asarray(scores, dtype=np.float64))
-    k = math.ceil((len(s) + 1) * level)
+    # Rounded first, so that e.g. 20 * 0.9 = 18.000000000000004 asks for the 18th score.
+    k = math.ceil(round((len(s) + 1) * level, 9))
     return float(s[k - 1]) if 1 <= k <= len(s) else math.inf
 
 

@@ -119,7 +119,10 @@ def test_predict_flags_an_orientation_between_the_grid_values(
     rc, out, err = run_cli(capsys, "predict", analyzed, *_args(row, orientation_deg=25))
     assert rc == 0, err
     assert "stress" in out and "% interval" in out and "failure probability: n/a" in out
-    assert "INTERPOLATED" in out and "orientation_deg=25 (interpolated between trained values 0 and 45)" in out
+    assert (
+        "INTERPOLATED" in out
+        and "orientation_deg=25 (interpolated between trained values 0 and 45)" in out
+    )
     rc, _, err = run_cli(capsys, "predict", analyzed, *_args(row), "--level", "1.5")
     assert rc == 2 and len(err.strip().splitlines()) == 1 and "interval level 1.5" in err
 

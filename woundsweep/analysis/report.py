@@ -163,6 +163,15 @@ def surrogate_lines(metrics: dict[str, Any]) -> list[str]:
             "calibrated per stage. Rows (geometries) train / early stopping / calibration / test: "
             f"{sizes}. Test RMSE {_f(t['rmse_log'])} in log stress, R² {_f(t['r2_log'])}.",
             "",
+            *(
+                [
+                    f"Only {sur['split_geometries']['test']} test geometries: the rows of one "
+                    "geometry move together, so these coverages are coarse.",
+                    "",
+                ]
+                if sur["split_geometries"]["test"] < 10
+                else []
+            ),
             "| nominal | empirical coverage | covered / rows | median width (upper / lower) | "
             "lowest stage coverage |",
             "|---|---|---|---|---|",

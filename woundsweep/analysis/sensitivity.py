@@ -59,7 +59,9 @@ def sobol_indices(
     }
     U = sample.sample(problem, n_base, calc_second_order=False, seed=seed)
     Y = np.asarray(func(U), dtype=np.float64)
-    res = analyze.analyze(problem, Y, calc_second_order=False, num_resamples=100, seed=seed)
+    # SALib seeds its bootstrap only for a truthy seed: map every seed to a nonzero one.
+    boot = 2 * abs(int(seed)) + 1
+    res = analyze.analyze(problem, Y, calc_second_order=False, num_resamples=100, seed=boot)
     out = {
         n: {
             "S1": float(res["S1"][i]),

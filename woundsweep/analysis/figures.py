@@ -266,15 +266,23 @@ def surrogate_test(
     """Observed against predicted stress on the test geometries, with the conformal bands."""
     fig = Figure(figsize=(5.5, 5), layout="constrained")
     ax = fig.subplots()
-    order = np.argsort(predicted)
-    p = np.exp(predicted[order])
-    for (level, hw), color in zip(sorted(half.items(), reverse=True), ("0.85", "0.65")):
-        w = np.exp(hw[order])
-        ax.fill_between(
-            p, p / w, p * w, color=color, step="mid", label=f"{float(level):.0%} interval"
+    p = np.exp(predicted)
+    # Each row's interval is a vertical bar at its estimate: wider level first, behind.
+    for (level, hw), color, lw in zip(
+        sorted(half.items(), key=lambda kv: -float(kv[0])), ("0.8", "0.5"), (3, 1.5)
+    ):
+        w = np.exp(hw)
+        ax.vlines(
+            p,
+            p / w,
+            p * w,
+            color=color,
+            lw=lw,
+            rasterized=True,
+            label=f"{float(level):.0%} interval",
         )
     ax.scatter(
-        np.exp(predicted), np.exp(observed), s=4, alpha=0.5, rasterized=True, label="test rows"
+        p, np.exp(observed), s=6, color="tab:blue", zorder=3, rasterized=True, label="test rows"
     )
     ax.plot([p.min(), p.max()], [p.min(), p.max()], "k-", lw=0.8)
     ax.set_xscale("log")
@@ -297,7 +305,7 @@ def sobol_bars(sobol: dict[str, Any]) -> Figure:
         ax.barh(y + off, [idx[n][key] for n in names], 0.4,
                 xerr=[idx[n][f"{key}_conf"] for n in names], label=label)  # fmt: skip
     ax.set_yticks(y, names)
-    ax.set_xlabel("Sobol index of log p99 (surrogate, training ranges)")
+    ax.set_xlabel("Sobol index of log p99 (surrogate, over the grid's values)")
     ax.legend(fontsize=8)
     return fig
 

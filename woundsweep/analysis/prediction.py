@@ -134,6 +134,9 @@ def predict_wound(
         raise AnalysisError(f"interval level {level}: expected a value between 0 and 1")
     meta = model.meta
     values, flagged = _check_params(meta, params)
+    if model.surrogate is not None:  # its training rows may differ (the random split's do)
+        own = _check_params({**meta, "ranges": model.surrogate[1]["ranges"]}, params)[1]
+        flagged += [f"surrogate: {f}" for f in own if f not in flagged]
     stages = list(meta["stages"]) if stages is None else [int(s) for s in stages]
     out_of_range_stages = [s for s in stages if s not in meta["stages"]]
     stage_flags = [f"stage={s} (trained on stages {meta['stages']})" for s in out_of_range_stages]

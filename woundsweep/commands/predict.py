@@ -115,12 +115,11 @@ def cmd(
         return
     click.echo(f"model: {loaded.path} ({loaded.meta['scheme']} split, {q} quantiles)")
     for p in preds:
+        stress = ""
         if p.stress_kPa is not None:
             lo, hi = p.interval_kPa or (None, None)
-            rng = "unbounded (too few calibration rows)" if lo is None else f"{lo:.4g}-{hi:.4g} kPa"
-            click.echo(
-                f"stage {p.stage}: stress {p.stress_kPa:.4g} kPa, {100 * level:g}% interval {rng}"
-            )
+            rng = "unbounded: too few calibration rows" if lo is None else f"{lo:.4g}-{hi:.4g} kPa"
+            stress = f"stress {p.stress_kPa:.4g} kPa ({100 * level:g}% interval {rng}); "
         lo, hi = p.stress_range_kPa
         # The end classes are open: their outer edge is only the smallest / largest training value.
         if p.quantile == 1:
@@ -130,7 +129,7 @@ def cmd(
         else:
             span = f"{lo:.4g}-{hi:.4g} kPa"
         probs = " ".join(f"{v:.2f}" for v in p.probabilities)
-        click.echo(f"stage {p.stage}: quantile {p.quantile}/{q}, {span}, p = [{probs}]")
+        click.echo(f"stage {p.stage}: {stress}quantile {p.quantile}/{q}, {span}, p = [{probs}]")
     if answer.failure_probability is None:
         click.echo(f"failure probability: n/a ({answer.failure_note})")
     else:

@@ -8,9 +8,12 @@ in mm.
 
 Modules: `settings` (features, constants, `ModelSettings`), `data` (rows from the store's
 validated reader, the model matrix), `splits` (quantile classes, the two schemes),
-`training` (XGBoost), `evaluation` (scores, importances), `paper` (stiff against soft,
-locations of the maximum), `fitting` (one scheme end to end, `SchemeFit`), `pipeline`
-(`run_analysis`), `model_io` (model files), `prediction`, `figures` and `report`. Names are
+`training` (XGBoost), `evaluation` (scores, importances, TreeSHAP), `paper` (stiff against
+soft, locations of the maximum), `fitting` (one scheme end to end, `SchemeFit`),
+`regression` (the stress surrogate of log p99) and `conformal` (its split-conformal
+intervals), `failure` (the failure-probability model), `sensitivity` (Sobol indices,
+SALib), `pipeline` (`run_analysis`), `model_io` (model files), `prediction`, `figures` and
+`report`. Names are
 re-exported lazily, so importing the package loads neither XGBoost nor matplotlib.
 """
 
@@ -33,9 +36,12 @@ __all__ = [
     "SchemeFit",
     "Split",
     "Trained",
+    "WoundPrediction",
     "assign_quantiles",
     "encode_features",
     "evaluate",
+    "fit_failure",
+    "fit_surrogate",
     "feature_importance",
     "fit_scheme",
     "geometry_groups",
@@ -45,12 +51,15 @@ __all__ = [
     "normalised_locations",
     "predict",
     "predict_proba",
+    "predict_wound",
     "quantile_edges",
     "random_split",
     "resolve_model_path",
     "resolve_settings",
     "run_analysis",
     "select_rows",
+    "shap_importance",
+    "sobol_indices",
     "skin_codes",
     "stiff_vs_soft",
     "train_model",
@@ -91,7 +100,13 @@ _HOME = {
     "load_model": "model_io",
     "resolve_model_path": "model_io",
     "Prediction": "prediction",
+    "WoundPrediction": "prediction",
     "predict": "prediction",
+    "predict_wound": "prediction",
+    "fit_surrogate": "regression",
+    "fit_failure": "failure",
+    "shap_importance": "evaluation",
+    "sobol_indices": "sensitivity",
 }
 
 __getattr__, __dir__ = lazy_exports(__name__, _HOME)

@@ -22,6 +22,7 @@ from .settings import STAGE_GROUPS  # noqa: E402
 
 if TYPE_CHECKING:
     from .fitting import SchemeFit
+    from .regression import SurrogateFit
 
 __all__ = [
     "FIGURE_STEMS",
@@ -31,15 +32,19 @@ __all__ = [
     "roc_curves",
     "save",
     "stiff_vs_soft",
+    "sobol_bars",
     "stress_distribution",
+    "surrogate_test",
     "training_curves",
     "write_all",
+    "write_surrogate",
 ]
 
 # Per-scheme figures carry a ``_<scheme>`` suffix.
 FIGURE_STEMS = {
     "per_scheme": ("training", "importance", "roc", "confusion"),
     "shared": ("stress_distribution", "stiff_vs_soft", "max_location"),
+    "surrogate": ("surrogate_test", "sobol"),
 }
 
 
@@ -253,3 +258,71 @@ def write_all(
     paths += save(stiff_vs_soft(pairs, stiff_soft), out_dir, "stiff_vs_soft")
     paths += save(max_locations(locs), out_dir, "max_location")
     return paths
+
+
+def surrogate_test(
+    observed: np.ndarray, predicted: np.ndarray, half: dict[str, np.ndarray], title: str
+) -> Figure:
+    """Observed against predicted stress on the test geometries, with the conformal bands."""
+    fig = Figure(figsize=(5.5, 5), layout="constrained")
+    ax = fig.subplots()
+    p = np.exp(predicted)
+    # Each row's interval is a vertical bar at its estimate: wider level first, behind.
+    for (level, hw), color, lw in zip(
+        sorted(half.items(), key=lambda kv: -float(kv[0])), ("0.8", "0.5"), (3, 1.5)
+    ):
+        w = np.exp(hw)
+        ax.vlines(
+            p,
+            p / w,
+            p * w,
+            color=color,
+            lw=lw,
+            rasterized=True,
+            label=f"{float(level):.0%} interval",
+        )
+    ax.scatter(
+        p, np.exp(observed), s=6, color="tab:blue", zorder=3, rasterized=True, label="test rows"
+    )
+    ax.plot([p.min(), p.max()], [p.min(), p.max()], "k-", lw=0.8)
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("surrogate estimate: p99 von Mises (kPa)")
+    ax.set_ylabel("simulated p99 von Mises (kPa)")
+    ax.legend(fontsize=8)
+    ax.set_title(title, fontsize=9)
+    return fig
+
+
+def sobol_bars(sobol: dict[str, Any]) -> Figure:
+    """First-order and total Sobol indices of the surrogate per input, with 95 % bootstrap bars."""
+    idx = sobol["indices"]
+    names = sobol["ranking_total"][::-1]
+    y = np.arange(len(names))
+    fig = Figure(figsize=(6.5, 0.4 * len(names) + 1.5), layout="constrained")
+    ax = fig.subplots()
+    for off, key, label in ((-0.2, "S1", "first order S1"), (0.2, "ST", "total ST")):
+        ax.barh(y + off, [idx[n][key] for n in names], 0.4,
+                xerr=[idx[n][f"{key}_conf"] for n in names], label=label)  # fmt: skip
+    ax.set_yticks(y, names)
+    ax.set_xlabel("Sobol index of log p99 (surrogate, over the grid's values)")
+    ax.legend(fontsize=8)
+    return fig
+
+
+def write_surrogate(
+    out_dir: Path, fit: SurrogateFit, rows: pd.DataFrame, sobol: dict[str, Any]
+) -> list[Path]:
+    """Write the surrogate's test figure and the Sobol figure; return the paths."""
+    from .conformal import half_widths
+    from .settings import COVERAGE_LEVELS, STRESS
+
+    test = fit.split.test
+    y = np.log(rows[STRESS].to_numpy(dtype=np.float64)[test])
+    stage = rows["stage"].to_numpy()[test]
+    scores = fit.meta["calibration_scores_log"]
+    half = {str(lv): half_widths(scores, stage, lv) for lv in COVERAGE_LEVELS}
+    title = f"stress surrogate: test geometries (n={len(test)})"
+    return save(surrogate_test(y, fit.pred_test, half, title), out_dir, "surrogate_test") + save(
+        sobol_bars(sobol), out_dir, "sobol"
+    )

@@ -26,7 +26,10 @@ from .splits import (
 )
 from .training import Trained, predict_proba, train_model
 
-__all__ = ["SchemeFit", "feature_ranges", "fit_scheme"]
+__all__ = ["MAX_LEVELS", "SchemeFit", "feature_levels", "feature_ranges", "fit_scheme"]
+
+# A numeric feature with more distinct training values than this is treated as continuous.
+MAX_LEVELS = 64
 
 
 class SchemeFit(NamedTuple):
@@ -56,6 +59,24 @@ def feature_ranges(X: np.ndarray) -> dict[str, dict[str, list[float]]]:
             if name in ("wound_shape", "skin_type", "stage") or len(vals) == 0:
                 continue
             out[shape][name] = [float(vals.min()), float(vals.max())]
+    return out
+
+
+def feature_levels(X: np.ndarray) -> dict[str, dict[str, list[float]]]:
+    """Per wound shape, the distinct training values of every numeric feature (the grid's
+    values), or none for a feature with more than `MAX_LEVELS` of them."""
+    out: dict[str, dict[str, list[float]]] = {}
+    shape_col = FEATURES.index("wound_shape")
+    for shape, code in SHAPE_CODES.items():
+        sub = X[X[:, shape_col] == code]
+        if len(sub) == 0:
+            continue
+        out[shape] = {}
+        for j, name in enumerate(FEATURES):
+            vals = np.unique(sub[:, j][np.isfinite(sub[:, j])])
+            if name in ("wound_shape", "skin_type", "stage") or not 0 < len(vals) <= MAX_LEVELS:
+                continue
+            out[shape][name] = vals.tolist()
     return out
 
 
@@ -120,6 +141,7 @@ def fit_scheme(
         },
         "stages": sorted(int(s) for s in train_rows["stage"].unique()),
         "ranges": feature_ranges(X[split.train]),
+        "levels": feature_levels(X[split.train]),
         "quantiles": q,
         "quantile_edges_kPa": edges.tolist(),
         "stress": STRESS,

@@ -1,8 +1,12 @@
-"""Model files: ``model_<scheme>.json`` (the XGBoost booster) and ``model_<scheme>_meta.json``.
+"""Model files: ``model_<scheme>.json`` (the XGBoost booster) and ``model_<scheme>_meta.json``;
+beside them the stress surrogate (``surrogate.json`` + ``surrogate_meta.json``) and the
+failure model (``failure_model.json``, absent when too few jobs failed, + its metadata).
 
-The metadata holds what prediction needs besides the booster: the feature order, the shape
-and skin codes, the per-shape feature ranges of the training rows, the trained stages and
-the quantile edges (kPa). It is tagged with `MODEL_FORMAT`.
+The classifier's metadata holds what prediction needs besides the booster: the feature
+order, the shape and skin codes, the per-shape feature ranges and grid values of the
+training rows, the trained stages and the quantile edges (kPa); it is tagged with
+`MODEL_FORMAT`. The surrogate's holds its ranges and calibration scores (`SURROGATE_FORMAT`),
+the failure model's its statement and the store's failure rate (`FAILURE_FORMAT`).
 """
 
 from __future__ import annotations
@@ -13,20 +17,41 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 
 from ..errors import AnalysisError
 from ..fsutil import atomic_write_bytes
-from .settings import MODEL_FORMAT
+from .settings import FAILURE_FORMAT, MODEL_FORMAT, SURROGATE_FORMAT
 
 if TYPE_CHECKING:
+    from .failure import FailureFit
     from .fitting import SchemeFit
+    from .regression import SurrogateFit
 
-__all__ = ["LoadedModel", "json_bytes", "load_model", "resolve_model_path", "save_model"]
+__all__ = [
+    "FAILURE_STEM",
+    "SURROGATE_STEM",
+    "LoadedModel",
+    "json_bytes",
+    "load_model",
+    "resolve_model_path",
+    "save_booster",
+    "save_companions",
+    "save_model",
+]
+
+SURROGATE_STEM = "surrogate"
+FAILURE_STEM = "failure_model"
 
 
 class LoadedModel(NamedTuple):
-    """A saved booster and its metadata (feature ranges, codes, quantile edges)."""
+    """A saved classifier and its metadata; the surrogate and failure model found beside it.
+
+    ``surrogate`` and ``failure`` are (booster, metadata) pairs, ``None`` where absent; a
+    failure model without a booster has ``(None, metadata)`` (its statement says why).
+    """
 
     path: Path
     booster: Any
     meta: dict[str, Any]
+    surrogate: tuple[Any, dict[str, Any]] | None = None
+    failure: tuple[Any, dict[str, Any]] | None = None
 
 
 def json_bytes(obj: Any) -> bytes:
@@ -41,6 +66,54 @@ def save_model(out_dir: Path, fit: SchemeFit) -> list[Path]:
     meta_path = out_dir / f"model_{fit.scheme}_meta.json"
     atomic_write_bytes(meta_path, json_bytes(fit.meta))
     return [model_path, meta_path]
+
+
+def save_booster(out_dir: Path, stem: str, booster: Any, meta: dict[str, Any]) -> list[Path]:
+    """Write ``stem.json`` (unless ``booster`` is None) and ``stem_meta.json`` atomically."""
+    paths = []
+    if booster is not None:
+        paths.append(out_dir / f"{stem}.json")
+        atomic_write_bytes(paths[-1], bytes(booster.save_raw("json")))
+    paths.append(out_dir / f"{stem}_meta.json")
+    atomic_write_bytes(paths[-1], json_bytes(meta))
+    return paths
+
+
+def save_companions(out_dir: Path, surrogate: SurrogateFit, failure: FailureFit) -> list[Path]:
+    """Write the stress surrogate and the failure model beside the classifiers."""
+    return save_booster(out_dir, SURROGATE_STEM, surrogate.booster, surrogate.meta) + save_booster(
+        out_dir, FAILURE_STEM, failure.booster, failure.meta
+    )
+
+
+def _read_booster(path: Path) -> Any:
+    import xgboost as xgb
+
+    booster = xgb.Booster()
+    try:
+        booster.load_model(str(path))
+    except xgb.core.XGBoostError:
+        raise AnalysisError(f"{path}: unreadable XGBoost model") from None
+    return booster
+
+
+def _read_meta(path: Path, fmt: str, what: str) -> dict[str, Any]:
+    try:
+        meta = json.loads(path.read_text())
+    except (OSError, ValueError):
+        raise AnalysisError(f"{path}: missing or unreadable model metadata") from None
+    if not isinstance(meta, dict) or meta.get("format") != fmt:
+        raise AnalysisError(f"{path}: not a woundsweep {what} description")
+    return meta
+
+
+def _companion(directory: Path, stem: str, fmt: str, what: str) -> tuple[Any, dict] | None:
+    meta_path = directory / f"{stem}_meta.json"
+    if not meta_path.is_file():
+        return None
+    meta = _read_meta(meta_path, fmt, what)
+    model_path = directory / f"{stem}.json"
+    return (_read_booster(model_path) if model_path.is_file() else None), meta
 
 
 def resolve_model_path(path: str | Path, scheme: str | None = None) -> Path:
@@ -59,19 +132,13 @@ def resolve_model_path(path: str | Path, scheme: str | None = None) -> Path:
 
 def load_model(path: str | Path, scheme: str | None = None) -> LoadedModel:
     """Load ``model_<scheme>.json`` and the ``model_<scheme>_meta.json`` beside it."""
-    import xgboost as xgb
-
     model_path = resolve_model_path(path, scheme)
-    meta_path = model_path.with_name(model_path.stem + "_meta.json")
-    try:
-        meta = json.loads(meta_path.read_text())
-    except (OSError, ValueError):
-        raise AnalysisError(f"{meta_path}: missing or unreadable model metadata") from None
-    if meta.get("format") != MODEL_FORMAT:
-        raise AnalysisError(f"{meta_path}: not a woundsweep model description")
-    booster = xgb.Booster()
-    try:
-        booster.load_model(str(model_path))
-    except xgb.core.XGBoostError:
-        raise AnalysisError(f"{model_path}: unreadable XGBoost model") from None
-    return LoadedModel(model_path, booster, meta)
+    meta = _read_meta(model_path.with_name(model_path.stem + "_meta.json"), MODEL_FORMAT, "model")
+    d = model_path.parent
+    return LoadedModel(
+        model_path,
+        _read_booster(model_path),
+        meta,
+        _companion(d, SURROGATE_STEM, SURROGATE_FORMAT, "stress surrogate"),
+        _companion(d, FAILURE_STEM, FAILURE_FORMAT, "failure model"),
+    )

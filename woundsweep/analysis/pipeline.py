@@ -1,4 +1,5 @@
-"""``woundsweep analyze``: every scheme fitted and evaluated, then metrics, models, figures, report.
+"""``woundsweep analyze``: every scheme fitted and evaluated, the stress surrogate with its
+conformal intervals and Sobol indices, the failure model; then metrics, models, figures, report.
 
 Settings are layered: `ModelSettings` defaults, the run's ``Sweep.analysis``, then the
 caller's overrides. Everything lands in ``RUN_DIR/analysis/`` (or ``out_dir``), each file
@@ -18,8 +19,9 @@ from .. import __version__
 from ..errors import AnalysisError
 from ..fsutil import atomic_write_bytes
 from .data import drop_orphans, encode_features, load_results, select_rows, sweep_settings
+from .failure import fit_failure
 from .fitting import fit_scheme
-from .model_io import json_bytes, save_model
+from .model_io import json_bytes, save_companions, save_model
 from .paper import location_summary, normalised_locations, stiff_vs_soft
 from .report import write_report
 from .settings import (
@@ -32,6 +34,25 @@ from .settings import (
 )
 
 __all__ = ["AnalysisOutput", "run_analysis"]
+
+
+def _surrogate(
+    rows: Any, X: np.ndarray, settings: Any, say: Callable[[str], None]
+) -> tuple[Any, dict[str, Any]]:
+    """The stress surrogate and its metrics with Sobol indices; or None and why not."""
+    from .regression import fit_surrogate
+    from .sensitivity import surrogate_sobol
+
+    say(f"training the stress surrogate on {len(rows)} rows...")
+    try:
+        fit = fit_surrogate(rows, X, settings)
+    except AnalysisError as err:
+        return None, {"statement": f"no stress surrogate: {err}"}
+    say(f"Sobol indices of the surrogate ({settings.sobol_samples} base samples)...")
+    sobol = surrogate_sobol(
+        fit.booster, fit.meta, settings.sobol_samples, settings.seed, settings.nthread
+    )
+    return fit, {**fit.metrics, "sensitivity": sobol}
 
 
 class AnalysisOutput(NamedTuple):
@@ -81,6 +102,9 @@ def run_analysis(
     for s in schemes:
         say(f"training the {s} split model on {len(rows)} rows ({q} quantiles)...")
         fits.append(fit_scheme(s, rows, X, skins, settings))
+    surrogate, surrogate_metrics = _surrogate(rows, X, settings, say)
+    say("training the failure model...")
+    failure = fit_failure(results, skins, settings)
     svs, pairs = stiff_vs_soft(rows)
     locs = normalised_locations(rows)
     stress = rows[STRESS].to_numpy(dtype=np.float64)
@@ -100,6 +124,8 @@ def run_analysis(
             "all_rows_quantile_edges": np.quantile(stress, np.linspace(0, 1, q + 1)).tolist(),
         },
         "schemes": {f.scheme: f.metrics for f in fits},
+        "surrogate": surrogate_metrics,
+        "failure": failure.metrics,
         "stiff_vs_soft": svs,
         "max_location": location_summary(locs),
     }
@@ -108,8 +134,12 @@ def run_analysis(
     files: list[Path] = []
     for f in fits:
         files += save_model(out, f)
+    if surrogate is not None:
+        files += save_companions(out, surrogate, failure)
     say("writing figures...")
     figs = figures.write_all(out, fits, stress, rows["stage"].to_numpy(), pairs, svs, locs)
+    if surrogate is not None:
+        figs += figures.write_surrogate(out, surrogate, rows, surrogate_metrics["sensitivity"])
     files += figs
     metrics_path = out / "metrics.json"
     atomic_write_bytes(metrics_path, json_bytes(metrics))

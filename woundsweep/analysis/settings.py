@@ -14,11 +14,17 @@ from collections.abc import Mapping
 from typing import Any
 
 from ..errors import AnalysisError
+from ..schema import FailureClass
 
 __all__ = [
     "FEATURES",
     "IMPORTANCE_GROUPS",
     "LOCATION_COLUMNS",
+    "CONVERGENCE_FAILURES",
+    "COVERAGE_LEVELS",
+    "FAILURE_FORMAT",
+    "JOB_FEATURES",
+    "MIN_FAILED_JOBS",
     "MIN_ROWS_PER_QUANTILE",
     "MODEL_FORMAT",
     "REQUIRED_COLUMNS",
@@ -26,6 +32,7 @@ __all__ = [
     "SHAPE_CODES",
     "STAGE_GROUPS",
     "STRESS",
+    "SURROGATE_FORMAT",
     "ModelSettings",
     "resolve_settings",
 ]
@@ -73,6 +80,17 @@ MIN_ROWS_PER_QUANTILE = 10
 # Stage groups of the location statistics and figures (Figure 2).
 STAGE_GROUPS = (("stage 1", (1,)), ("stage 2", (2,)), ("stages 3-6", (3, 4, 5, 6)))
 MODEL_FORMAT = "woundsweep-quantile-model/1"
+SURROGATE_FORMAT = "woundsweep-stress-surrogate/1"
+FAILURE_FORMAT = "woundsweep-failure-model/1"
+# Nominal levels whose empirical coverage on the test geometries metrics.json reports.
+COVERAGE_LEVELS = (0.8, 0.95)
+# The failure model's features: a job's parameters (no stage: the job fails as a whole).
+JOB_FEATURES: tuple[str, ...] = tuple(f for f in FEATURES if f != "stage")
+# Job outcomes that count as "did not converge" (iteration or time budget spent); crashes,
+# out-of-memory, mesh failures and invalid input say nothing about convergence and are left out.
+CONVERGENCE_FAILURES = (FailureClass.NOT_CONVERGED.value, FailureClass.TIMEOUT.value)
+# Fewer failed (or converged) jobs than this train no failure model; the report says so.
+MIN_FAILED_JOBS = 10
 
 
 @dataclasses.dataclass(frozen=True)
@@ -92,6 +110,7 @@ class ModelSettings:
     colsample_bytree: float = 1.0
     reg_lambda: float = 1.0
     nthread: int = 2  # fixed, so that identical seeds give identical models
+    sobol_samples: int = 1024  # Saltelli base samples N (a power of 2): N (d + 2) surrogate calls
 
     def check(self) -> ModelSettings:
         """Raise `AnalysisError` on values XGBoost or the splits cannot use."""
@@ -102,6 +121,9 @@ class ModelSettings:
                 raise AnalysisError(
                     f"analysis.{name}: expected at least 1, got {getattr(self, name)}"
                 )
+        n = self.sobol_samples
+        if n < 16 or n & (n - 1):
+            raise AnalysisError(f"analysis.sobol_samples: expected a power of 2 >= 16, got {n}")
         if self.early_stopping_rounds < 1:
             raise AnalysisError("analysis.early_stopping_rounds: expected at least 1")
         if not (0 < self.train_fraction < 1 and 0 < self.validation_fraction < 1):

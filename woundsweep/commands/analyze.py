@@ -22,6 +22,10 @@ def _param(values: tuple[str, ...]) -> dict[str, str]:
     return out
 
 
+def _pct(x: float | None) -> str:
+    return "n/a" if x is None else f"{100 * x:.1f}%"
+
+
 def summary_lines(metrics: dict[str, Any]) -> list[str]:
     """A few lines for the terminal: rows, per-scheme scores, stiff vs soft."""
     rows = metrics["rows"]
@@ -36,6 +40,20 @@ def summary_lines(metrics: dict[str, Any]) -> list[str]:
             f"{scheme:>8} split ({sizes}): test macro AUC {auc}, accuracy {t['accuracy']:.3f}, "
             f"best round {m['best_iteration'] + 1}, top features {', '.join(m['importance']['ranking_weight'][:2])}"
         )
+    sur = metrics.get("surrogate", {})
+    if "test" in sur:
+        cov = ", ".join(
+            f"{_pct(c['empirical'])} at {float(lv):.0%}"
+            for lv, c in sur["test"]["coverage"].items()
+        )
+        lines.append(
+            f"stress surrogate: test coverage {cov} ({sur['test']['rows']} rows, "
+            f"{sur['split_geometries']['test']} geometries); Sobol total index top 3: "
+            + ", ".join(sur["sensitivity"]["ranking_total"][:3])
+        )
+    else:
+        lines.append(sur.get("statement", "no stress surrogate"))
+    lines.append(f"failure model: {metrics.get('failure', {}).get('statement', 'n/a')}")
     for shape, st in metrics["stiff_vs_soft"].items():
         lines.append(
             f"stiff > soft ({shape}): {100 * st['fraction_stiff_greater']:.1f}% of {st['pairs']} pairs"

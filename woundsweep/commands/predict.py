@@ -1,16 +1,18 @@
-"""``woundsweep predict MODEL_OR_RUN_DIR --shape ... (all parameters)``: one wound's stress quantile."""
+"""``woundsweep predict MODEL_OR_RUN_DIR --shape ... (all parameters)``: one wound's stress
+estimate with its interval, the paper's stress quantile and the failure probability."""
 
 from __future__ import annotations
 
 import json
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import click
 
 from ..clitypes import FiniteFloat
 
-__all__ = ["cmd"]
+__all__ = ["cmd", "parse_params"]
 
 
 # The Table 1 parameters given as numbers: option, manifest column, required, help.
@@ -45,6 +47,15 @@ def _numeric_params(f: Callable[..., None]) -> Callable[..., None]:
     return f
 
 
+def parse_params(shape: str, skin_type: str, numeric: dict[str, float | None]) -> dict[str, Any]:
+    """The wound's parameters by manifest column name, from the command's options."""
+    return {
+        "wound_shape": shape,
+        **{column: numeric[column] for _, column, _, _ in _NUMERIC_PARAMS},
+        "skin_type": skin_type,
+    }
+
+
 @click.command("predict")
 @click.argument("model", type=click.Path(path_type=Path))
 @click.option(
@@ -58,6 +69,10 @@ def _numeric_params(f: Callable[..., None]) -> Callable[..., None]:
 @click.option("--split", "scheme", type=click.Choice(["random", "geometry"]), default=None,
               help="Which model of a run directory [geometry if present].")  # fmt: skip
 @click.option(
+    "--level", type=FiniteFloat(), default=0.9, show_default=True,
+    help="Nominal coverage of the stress interval, between 0 and 1.",
+)  # fmt: skip
+@click.option(
     "--allow-extrapolation", is_flag=True, help="Answer outside the training ranges, flagged."
 )
 @click.option("--json", "as_json", is_flag=True, help="Print JSON instead of a table.")
@@ -67,42 +82,52 @@ def cmd(
     skin_type: str,
     stages: tuple[int, ...],
     scheme: str | None,
+    level: float,
     allow_extrapolation: bool,
     as_json: bool,
     **numeric: float | None,
 ) -> None:
-    """Predict the maximal-stress quantile of one wound with a model from `woundsweep analyze`.
+    """Predict one wound's maximal stress with the models from `woundsweep analyze`.
 
-    MODEL is a model_<split>.json file or a run directory. Prints, per stage, the predicted
-    quantile (1 = lowest stresses), the class probabilities and the quantile's stress range
-    in kPa (the end classes are bounded by the smallest / largest training stress).
+    MODEL is a model_<split>.json file or a run directory. Prints, per stage, the stress
+    surrogate's estimate (p99 von Mises, kPa) with its conformal interval at --level, the
+    paper's quantile class (1 = lowest stresses), its class probabilities and stress range in
+    kPa (the end classes are bounded by the smallest / largest training stress); then the
+    probability that the job fails to converge. Values between the trained grid values are
+    answered and flagged as interpolated; values outside the trained ranges are refused
+    unless --allow-extrapolation.
     """
-    from ..analysis import load_model, predict
+    from ..analysis import load_model, predict_wound
     from ..errors import AnalysisError
 
     try:
         loaded = load_model(model, scheme)
-        quantiles, scheme_name = int(loaded.meta["quantiles"]), str(loaded.meta["scheme"])
+        q, scheme_name = int(loaded.meta["quantiles"]), str(loaded.meta["scheme"])
     except (AttributeError, TypeError, KeyError, ValueError) as err:  # e.g. metadata `null`
         raise AnalysisError(f"{model}: malformed model metadata ({type(err).__name__})") from None
-    params = {
-        "wound_shape": shape,
-        **{column: numeric[column] for _, column, _, _ in _NUMERIC_PARAMS},
-        "skin_type": skin_type,
-    }
-    preds = predict(loaded, params, list(stages) or None, allow_extrapolation)
-    q = quantiles
+    params = parse_params(shape, skin_type, numeric)
+    answer = predict_wound(loaded, params, list(stages) or None, allow_extrapolation, level)
+    preds = answer.stages
     if as_json:
         out = {
             "model": str(loaded.path),
             "scheme": scheme_name,
             "quantiles": q,
+            "level": level,
             "predictions": [p._asdict() for p in preds],
+            "failure_probability": answer.failure_probability,
+            "failure_note": answer.failure_note,
+            "interpolated": answer.interpolated,
         }
         click.echo(json.dumps(out, indent=1))
         return
     click.echo(f"model: {loaded.path} ({scheme_name} split, {q} quantiles)")
     for p in preds:
+        stress = ""
+        if p.stress_kPa is not None:
+            lo, hi = p.interval_kPa or (None, None)
+            rng = "unbounded: too few calibration rows" if lo is None else f"{lo:.4g}-{hi:.4g} kPa"
+            stress = f"stress {p.stress_kPa:.4g} kPa ({100 * level:g}% interval {rng}); "
         lo, hi = p.stress_range_kPa
         # The end classes are open: their outer edge is only the smallest / largest training value.
         if p.quantile == 1:
@@ -112,7 +137,15 @@ def cmd(
         else:
             span = f"{lo:.4g}-{hi:.4g} kPa"
         probs = " ".join(f"{v:.2f}" for v in p.probabilities)
-        click.echo(f"stage {p.stage}: quantile {p.quantile}/{q}, {span}, p = [{probs}]")
+        click.echo(f"stage {p.stage}: {stress}quantile {p.quantile}/{q}, {span}, p = [{probs}]")
+    if answer.failure_probability is None:
+        click.echo(f"failure probability: n/a ({answer.failure_note})")
+    else:
+        click.echo(f"failure probability: {answer.failure_probability:.3f} ({answer.failure_note})")
+    if answer.interpolated:
+        click.echo(
+            "INTERPOLATED (between the trained grid values): " + "; ".join(answer.interpolated)
+        )
     if any(p.extrapolated for p in preds):
         flags = sorted({f for p in preds for f in p.extrapolated})
         click.echo("EXTRAPOLATED (outside the training data): " + "; ".join(flags))

@@ -1,0 +1,146 @@
+"""``woundsweep analyze`` and ``predict`` with the stress surrogate, through the CLI: the
+interval around the estimate, the saved booster's own answer, interpolation flags, the
+failure statement, the report's sections and one-line refusals."""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from synthetic_store import SMALL_SWEEP, depth_stress, write_store
+
+from woundsweep.cli import main
+from woundsweep.sweep.grid import DEFAULTS
+from woundsweep.sweep.results import read_results
+
+# 12 geometries x 3 skins x 3 orientations = 108 jobs x 6 stages = 648 rows.
+SWEEP = {
+    **SMALL_SWEEP,
+    "grid": {
+        **SMALL_SWEEP["grid"],
+        "dermal_thickness_mm": [1],
+        "subcutis_thickness_factor": [1],
+        "patch_size_factor": [2],
+    },
+}
+FAST = ["--param", "n_estimators=20", "--param", "learning_rate=0.3",
+        "--param", "early_stopping_rounds=5", "--param", "sobol_samples=256"]  # fmt: skip
+FEATURES = [
+    "wound_shape", "dermal_thickness_mm", "subcutis_thickness_factor", "patch_size_factor",
+    "wound_width_factor", "wound_depth_factor", "wound_aspect_factor", "mesh_size_factor",
+    "orientation_deg", "skin_type", "stage",
+]  # fmt: skip
+
+
+def run_cli(capsys: pytest.CaptureFixture[str], *args: object) -> tuple[int, str, str]:
+    rc = main([str(a) for a in args])
+    out, err = capsys.readouterr()
+    return rc, out, err
+
+
+@pytest.fixture(scope="module")
+def analyzed(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    rd = tmp_path_factory.mktemp("surrogate") / "run"
+    write_store(rd, depth_stress, sweep=SWEEP, seed=3, failed_fraction=0.0)
+    with contextlib.redirect_stdout(io.StringIO()):
+        assert main(["analyze", str(rd), "--split", "geometry", *FAST]) == 0
+    return rd
+
+
+def _args(row: pd.Series, **change: object) -> list[str]:
+    r = {**row.to_dict(), **change}
+    args = [
+        "--shape", r["wound_shape"], "--dermal-thickness", r["dermal_thickness_mm"],
+        "--subcutis-thickness-factor", r["subcutis_thickness_factor"],
+        "--patch-size-factor", r["patch_size_factor"], "--wound-width-factor", r["wound_width_factor"],
+        "--mesh-size-factor", r["mesh_size_factor"], "--orientation", r["orientation_deg"],
+        "--skin-type", r["skin_type"], "--stage", int(r["stage"]),
+    ]  # fmt: skip
+    if r["wound_shape"] == "wedge":
+        args += ["--wound-depth-factor", r["wound_depth_factor"]]
+    else:
+        args += ["--wound-aspect-factor", r["wound_aspect_factor"]]
+    return [str(a) for a in args]
+
+
+def _training_row(rd: Path, shape: str) -> pd.Series:
+    """A converged row inside the trained ranges of the classifier and the surrogate."""
+    rows = read_results(rd)
+    rows = rows[(rows["wound_shape"] == shape) & (rows["status"] == "converged")]
+    for stem in ("model_geometry", "surrogate"):
+        meta = json.loads((rd / "analysis" / f"{stem}_meta.json").read_text())
+        for col, (lo, hi) in meta["ranges"][shape].items():
+            rows = rows[rows[col].between(lo, hi)]
+    return rows.iloc[3]
+
+
+@pytest.mark.parametrize("shape", ["wedge", "cylindrical"])
+def test_predict_interval_contains_the_saved_surrogates_estimate(
+    analyzed: Path, shape: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import xgboost as xgb
+
+    row = _training_row(analyzed, shape)
+    rc, out, err = run_cli(capsys, "predict", analyzed, *_args(row), "--json", "--level", "0.8")
+    assert rc == 0, err
+    answer = json.loads(out)
+    (pred,) = answer["predictions"]
+    lo, hi = pred["interval_kPa"]
+    assert lo < pred["stress_kPa"] < hi and pred["level"] == 0.8
+    # The saved booster's own answer, from the documented encoding.
+    booster = xgb.Booster()
+    booster.load_model(str(analyzed / "analysis" / "surrogate.json"))
+    c_kPa = DEFAULTS["materials"]["skin_types"][row.skin_type]["c_kPa"]
+    x = [1.0 if shape == "wedge" else 0.0, row.dermal_thickness_mm, row.subcutis_thickness_factor,
+         row.patch_size_factor, row.wound_width_factor, row.wound_depth_factor, row.wound_aspect_factor,
+         row.mesh_size_factor, row.orientation_deg, c_kPa, float(row.stage)]  # fmt: skip
+    log_est = float(booster.predict(xgb.DMatrix(np.array([x]), feature_names=FEATURES))[0])
+    assert pred["stress_kPa"] == pytest.approx(math.exp(log_est), rel=1e-6)
+    # Symmetric in log stress: the estimate is the geometric mean of the bounds.
+    assert math.sqrt(lo * hi) == pytest.approx(pred["stress_kPa"], rel=1e-9)
+    rc, out, _ = run_cli(capsys, "predict", analyzed, *_args(row), "--json", "--level", "0.95")
+    lo95, hi95 = json.loads(out)["predictions"][0]["interval_kPa"]
+    assert lo95 <= lo and hi95 >= hi
+    assert answer["interpolated"] == [] and pred["extrapolated"] == []
+    assert answer["failure_probability"] is None
+    assert answer["failure_note"].startswith("no failure model: 0 of 108 jobs failed")
+
+
+def test_predict_flags_an_orientation_between_the_grid_values(
+    analyzed: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    row = _training_row(analyzed, "wedge")
+    rc, out, err = run_cli(capsys, "predict", analyzed, *_args(row, orientation_deg=25))
+    assert rc == 0, err
+    assert "stress" in out and "% interval" in out and "failure probability: n/a" in out
+    assert (
+        "INTERPOLATED" in out
+        and "orientation_deg=25 (interpolated between trained values 0 and 45)" in out
+    )
+    rc, _, err = run_cli(capsys, "predict", analyzed, *_args(row), "--level", "1.5")
+    assert rc == 2 and len(err.strip().splitlines()) == 1 and "interval level 1.5" in err
+
+
+def test_metrics_and_report_hold_coverage_failure_and_sobol(analyzed: Path) -> None:
+    a = analyzed / "analysis"
+    m = json.loads((a / "metrics.json").read_text())
+    s = m["surrogate"]
+    assert set(s["test"]["coverage"]) == {"0.8", "0.95"}
+    assert sum(s["split_rows"].values()) == m["rows"]["used_rows"]
+    assert s["test"]["coverage"]["0.8"]["rows"] == s["split_rows"]["test"]
+    assert m["failure"]["trained"] is False and m["failure"]["failed_jobs"] == 0
+    ranking = s["sensitivity"]["ranking_total"]
+    assert ranking[0] == "wound_depth"
+    report = (a / "report.md").read_text()
+    assert "| 80% |" in report and "| 95% |" in report
+    assert f"Top three by Sobol total index: {', '.join(ranking[:3])}." in report
+    assert "no failure model: 0 of 108 jobs" in report
+    for stem in ("sobol", "surrogate_test"):
+        assert (a / f"{stem}.png").read_bytes()[:4] == b"\x89PNG"
+    assert (a / "surrogate_meta.json").is_file() and not (a / "failure_model.json").exists()

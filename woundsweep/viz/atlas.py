@@ -101,7 +101,7 @@ def _index_table(manifest: pd.DataFrame, results: pd.DataFrame, views: set[int])
     )
     jobs = results.drop_duplicates("job_index").set_index("job_index")
     cols = [("job_index", "job", "num")]
-    cols += [(c, c, "str" if manifest[c].dtype == object else "num") for c in _INDEX_PARAMS]
+    cols += [(c, c, "num" if pd.api.types.is_numeric_dtype(manifest[c]) else "str") for c in _INDEX_PARAMS]
     cols += [("failure_class", "failure_class", "str"), ("failed_stage", "failed_stage", "num")]
     cols += [(f"p99_s{k}", f"p99_von_mises_kPa stage {k}", "num") for k in STAGES]
     cols += [("view", "3D", "str")]

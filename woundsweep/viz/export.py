@@ -10,9 +10,8 @@ and the exterior triangles, with
 - cell data ``von_mises_kPa`` (cellwise; NaN on the triangles), ``cell_tag`` (1 dermis,
   2 subcutis; 0 on triangles), ``facet_tag`` (11-17 as in `schema.FACET_TAGS`; 0 on
   tetrahedra) and ``closure_zone`` (1 on the closure zone's wound triangles),
-- field data ``stage`` and ``job_index``.
-
-Files are written by meshio (binary, zlib), each atomically.
+The stage of a VTU is its PVD timestep (and in its name); units and the per-stage notes are
+in the JSON. Files are written by meshio (binary, zlib), each atomically.
 """
 
 from __future__ import annotations
@@ -48,15 +47,11 @@ def _mesh(jf: JobFields, stage: int | None) -> Any:
     if stage is not None:
         vm = jf.fields[stage][1].astype(np.float32)
         cell_data["von_mises_kPa"] = [vm, np.full(n_tri, np.nan, np.float32)]
-    field_data = {"job_index": np.array([int(jf.job["job_index"])], np.int64)}
-    if stage is not None:
-        field_data["stage"] = np.array([stage], np.int64)
     return meshio.Mesh(
         jf.points,
         [("tetra", jf.cells), ("triangle", jf.facets)],
         point_data={"displacement_mm": np.asarray(u, np.float32)},
         cell_data=cell_data,
-        field_data=field_data,
     )
 
 

@@ -11,7 +11,7 @@ import h5py
 import numpy as np
 import pytest
 
-from tests.viz_store import displacement, make_store, von_mises
+from viz_store import displacement, make_store, von_mises
 from woundsweep.cli import main
 from woundsweep.mesh.cache import load_mesh, mesh_path
 from woundsweep.model.parameters import ClosureZone

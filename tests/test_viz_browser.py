@@ -66,7 +66,12 @@ def _plot_box(driver) -> tuple[int, int, int, int]:
         "return [b.left, b.top, b.width, b.height, window.devicePixelRatio];"
     )
     x, y, w, h, dpr = r
-    return (int((x + 0.25 * w) * dpr), int((y + 0.25 * h) * dpr), int((x + 0.7 * w) * dpr), int((y + 0.8 * h) * dpr))
+    return (
+        int((x + 0.25 * w) * dpr),
+        int((y + 0.25 * h) * dpr),
+        int((x + 0.7 * w) * dpr),
+        int((y + 0.8 * h) * dpr),
+    )
 
 
 def _load(driver, path: Path) -> None:
@@ -107,15 +112,22 @@ def test_view_renders_and_switches_stage(driver, site, tmp_path: Path) -> None:
         driver.execute_script(
             f"var s=document.getElementById('stage'); s.value='{k - 1}'; s.dispatchEvent(new Event('change'));"
         )
-        _wait(driver, f"return document.getElementById('plot').layout.title.text.indexOf('stage {k}') >= 0;")
+        _wait(
+            driver,
+            f"return document.getElementById('plot').layout.title.text.indexOf('stage {k}') >= 0;",
+        )
         cmax[k] = driver.execute_script("return document.getElementById('plot').data[0].cmax;")
     # The fixture's von Mises is 10 kPa * stage + the same field: the surface max moves by 10.
     assert cmax[2] - cmax[1] == pytest.approx(10.0, abs=1e-3)
     # "colour scale up to p99" uses the stage's p99 from the table.
     driver.execute_script("document.getElementById('clip').click();")
     _wait(driver, f"return document.getElementById('plot').data[0].cmax < {cmax[2] - 1e-6};")
-    data = driver.execute_script("var d=JSON.parse(document.getElementById('wsdata').textContent); return d.stages[1].p99_von_mises_kPa;")
-    assert driver.execute_script("return document.getElementById('plot').data[0].cmax;") == pytest.approx(data)
+    data = driver.execute_script(
+        "var d=JSON.parse(document.getElementById('wsdata').textContent); return d.stages[1].p99_von_mises_kPa;"
+    )
+    assert driver.execute_script(
+        "return document.getElementById('plot').data[0].cmax;"
+    ) == pytest.approx(data)
     names = driver.execute_script("return document.getElementById('plot').data.map(t => t.name);")
     assert names == ["surface", "closure zone", "max von Mises"]
     assert console_errors(driver) == []
@@ -149,7 +161,9 @@ def test_atlas_index_lists_sorts_filters(driver, site, tmp_path: Path) -> None:
         "return [...document.querySelectorAll('#index tbody tr')].map(r => r.children[c].textContent);"
     )
     assert classes == ["converged", "not-converged", "pending"]
-    driver.find_elements("css selector", "#index thead tr:first-child th")[0].click()  # job, descending
+    driver.find_elements("css selector", "#index thead tr:first-child th")[
+        0
+    ].click()  # job, descending
     assert rows() == [2, 1, 0]
     box = driver.find_element("css selector", "input[data-col='skin_type']")
     box.send_keys("soft")

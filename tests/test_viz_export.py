@@ -10,8 +10,8 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
-
 from viz_store import displacement, make_store, von_mises
+
 from woundsweep.cli import main
 from woundsweep.mesh.cache import load_mesh, mesh_path
 from woundsweep.model.parameters import ClosureZone
@@ -73,7 +73,9 @@ def test_round_trip_read_by_vtk(store: Path, tmp_path: Path, capsys) -> None:
     for k, name in steps:
         got = _read_vtu(out / "job-0" / name)
         np.testing.assert_array_equal(got["points"], mesh.points)
-        assert (got["types"] == _TETRA).sum() == n_tet and (got["types"] == _TRIANGLE).sum() == n_tri
+        assert (got["types"] == _TETRA).sum() == n_tet and (
+            got["types"] == _TRIANGLE
+        ).sum() == n_tri
         conn = got["conn"]
         np.testing.assert_array_equal(conn[: 4 * n_tet].reshape(-1, 4), mesh.cells)
         np.testing.assert_array_equal(conn[4 * n_tet :].reshape(-1, 3), mesh.facets)
@@ -82,7 +84,9 @@ def test_round_trip_read_by_vtk(store: Path, tmp_path: Path, capsys) -> None:
         np.testing.assert_array_equal(got["displacement_mm"], u)
         np.testing.assert_array_equal(got["von_mises_kPa"][:n_tet], vm)
         assert np.isnan(got["von_mises_kPa"][n_tet:]).all()
-        np.testing.assert_allclose(got["displacement_mm"], displacement(mesh.points, k, 0), rtol=1e-6, atol=1e-7)
+        np.testing.assert_allclose(
+            got["displacement_mm"], displacement(mesh.points, k, 0), rtol=1e-6, atol=1e-7
+        )
         np.testing.assert_allclose(
             got["von_mises_kPa"][:n_tet], von_mises(mesh.points, mesh.cells, k, 0), rtol=1e-6
         )
@@ -104,10 +108,14 @@ def test_stages_not_kept_are_named(store: Path, tmp_path: Path, capsys) -> None:
     info = json.loads((out / "job-1" / "job-1.json").read_text())
     assert [s["stage"] for s in info["stages"] if s["file"]] == [3]
     assert info["units"] == "mm, kPa, mN, s"
-    steps = [d.get("timestep") for d in ET.parse(out / "job-1" / "job-1.pvd").getroot().iter("DataSet")]
+    steps = [
+        d.get("timestep") for d in ET.parse(out / "job-1" / "job-1.pvd").getroot().iter("DataSet")
+    ]
     assert steps == ["3"]
     got = _read_vtu(out / "job-1" / "job-1_stage3.vtu")
-    np.testing.assert_array_equal(got["displacement_mm"], _store_fields(store, info["job_id"])[3][0])
+    np.testing.assert_array_equal(
+        got["displacement_mm"], _store_fields(store, info["job_id"])[3][0]
+    )
 
 
 def test_export_all_counts(store: Path, tmp_path: Path, capsys) -> None:

@@ -90,8 +90,14 @@ def _log_html(path: Path) -> str:
         if size > LOG_BYTES:
             fh.seek(size - LOG_BYTES)
         text = fh.read().decode("utf-8", "replace")
-    cut = f"(the last {LOG_BYTES // 1024} KiB of {size / 1024:.0f} KiB) " if size > LOG_BYTES else ""
-    return f"<p class=\"legend\">{cut}{escape(str(path))}</p>\n<pre class=\"log\">{escape(text)}</pre>\n"
+    cut = (
+        f"(the last {LOG_BYTES / 1024:.0f} KiB of {size / 1024:.0f} KiB) "
+        if size > LOG_BYTES
+        else ""
+    )
+    return (
+        f'<p class="legend">{cut}{escape(str(path))}</p>\n<pre class="log">{escape(text)}</pre>\n'
+    )
 
 
 def _index_table(manifest: pd.DataFrame, results: pd.DataFrame, views: set[int]) -> dict[str, Any]:
@@ -101,7 +107,10 @@ def _index_table(manifest: pd.DataFrame, results: pd.DataFrame, views: set[int])
     )
     jobs = results.drop_duplicates("job_index").set_index("job_index")
     cols = [("job_index", "job", "num")]
-    cols += [(c, c, "num" if pd.api.types.is_numeric_dtype(manifest[c]) else "str") for c in _INDEX_PARAMS]
+    cols += [
+        (c, c, "num" if pd.api.types.is_numeric_dtype(manifest[c]) else "str")
+        for c in _INDEX_PARAMS
+    ]
     cols += [("failure_class", "failure_class", "str"), ("failed_stage", "failed_stage", "num")]
     cols += [(f"p99_s{k}", f"p99_von_mises_kPa stage {k}", "num") for k in STAGES]
     cols += [("view", "3D", "str")]
@@ -153,7 +162,7 @@ def _analysis(run_dir: Path, out: Path) -> int:
     dst.mkdir(parents=True, exist_ok=True)
     total = 0
     figures = sorted(p for p in src.iterdir() if p.suffix in (".png", ".svg"))
-    for p in figures + sorted(src.glob("*.json")):
+    for p in figures + sorted(src.glob("metrics.json")):
         shutil.copyfile(p, dst / p.name)
         total += p.stat().st_size
     body = '<nav><a href="../index.html">index</a></nav>\n<h1>Analysis</h1>\n'
@@ -167,10 +176,16 @@ def _analysis(run_dir: Path, out: Path) -> int:
         for p in figures
         if p.suffix == ".png"
     )
-    body += "<p>" + ", ".join(
-        f'<a href="{escape(p.name)}">{escape(p.name)}</a>' for p in sorted(dst.glob("*.json"))
-    ) + "</p>\n"
-    return total + _write(dst / "index.html", page("woundsweep analysis", body, css_href="../assets/style.css"))
+    body += (
+        "<p>"
+        + ", ".join(
+            f'<a href="{escape(p.name)}">{escape(p.name)}</a>' for p in sorted(dst.glob("*.json"))
+        )
+        + "</p>\n"
+    )
+    return total + _write(
+        dst / "index.html", page("woundsweep analysis", body, css_href="../assets/style.css")
+    )
 
 
 def build_atlas(
@@ -199,7 +214,12 @@ def build_atlas(
     where = {j: i for i, j in enumerate(order)}
     by_job = {int(j): g for j, g in results.groupby("job_index")}
     cells = {j: int(g["cells"].max()) if g["cells"].notna().any() else 0 for j, g in by_job.items()}
-    info = {"view_bytes": 0, "views": 0, "cells_done": 0, "cells_total": sum(cells.get(j, 0) for j in views)}
+    info = {
+        "view_bytes": 0,
+        "views": 0,
+        "cells_done": 0,
+        "cells_total": sum(cells.get(j, 0) for j in views),
+    }
     cache: dict[Any, Any] = {}
     head = '<script src="../assets/plotly.min.js"></script>\n'
     for n, job in enumerate(man.to_dict("records"), 1):
@@ -214,12 +234,16 @@ def build_atlas(
         elif j in views:
             jf = load_job(run.run_dir, job, rows, zone, cache)
         footer = "<h2>Log</h2>\n" + _log_html(run.run_dir / "logs" / f"job-{job['job_id']}.log")
-        body = job_body(job, rows, jf, view_note=note, header=_nav(j, prev, nxt, has_analysis), footer=footer)
+        body = job_body(
+            job, rows, jf, view_note=note, header=_nav(j, prev, nxt, has_analysis), footer=footer
+        )
         if jf is not None:
             body += '<script src="../assets/viewer.js"></script>\n'
         size = _write(
             out / "jobs" / f"job-{j}.html",
-            page(f"woundsweep job {j}", body, head if jf is not None else "", "../assets/style.css"),
+            page(
+                f"woundsweep job {j}", body, head if jf is not None else "", "../assets/style.css"
+            ),
         )
         total += size
         if jf is not None:
@@ -232,7 +256,11 @@ def build_atlas(
     body = (
         f"<h1>woundsweep atlas <small>{escape(run.run_dir.name)} &middot; "
         f"{len(order)} jobs</small></h1>\n"
-        + ('<nav><a href="analysis/index.html">analysis: report and figures</a></nav>\n' if has_analysis else "")
+        + (
+            '<nav><a href="analysis/index.html">analysis: report and figures</a></nav>\n'
+            if has_analysis
+            else ""
+        )
         + '<p class="legend">Click a header to sort; type in the boxes to filter (text: substring; '
         "numbers: 2, &gt;1, &lt;=0.5 or 1..2). Units are in the column names. "
         f"Built {escape(time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime()))} from {escape(str(run.run_dir))}; "

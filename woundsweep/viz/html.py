@@ -109,6 +109,6 @@ def page(title: str, body: str, head: str = "", css_href: str | None = None) -> 
         else f"<style>\n{asset('style.css')}</style>"
     )
     return (
-        "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n"
+        '<!DOCTYPE html>\n<html lang="en">\n<head>\n<meta charset="utf-8">\n'
         f"<title>{escape(title)}</title>\n{style}\n{head}</head>\n<body>\n{body}</body>\n</html>\n"
     )

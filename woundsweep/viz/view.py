@@ -52,7 +52,9 @@ def view_data(jf: JobFields) -> dict[str, Any]:
             "status": note.status,
             "stored": note.stored,
             "reason": note.reason,
-            "p99_von_mises_kPa": _num(rows.loc[k, "p99_von_mises_kPa"]) if k in rows.index else None,
+            "p99_von_mises_kPa": _num(rows.loc[k, "p99_von_mises_kPa"])
+            if k in rows.index
+            else None,
         }
         if note.stored:
             u, vm = jf.fields[k]
@@ -126,8 +128,7 @@ def job_body(
             '<p class="legend">Deformed exterior surface (displacement at scale 1), each '
             "triangle coloured by the von Mises stress of the tetrahedron it bounds; black "
             "outline: the closure zone; red diamond: the cell of the largest von Mises "
-            "(deformed midpoint). Lengths in mm.</p>\n"
-            + json_script("wsdata", view_data(jf))
+            "(deformed midpoint). Lengths in mm.</p>\n" + json_script("wsdata", view_data(jf))
         )
     else:
         view = f'<p class="noview">{escape(view_note)}</p>\n'

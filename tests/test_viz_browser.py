@@ -157,7 +157,7 @@ def test_atlas_index_lists_sorts_filters(driver, site, tmp_path: Path) -> None:
     assert rows() == [0, 1, 2]
     assert driver.find_element("id", "count").text == "3 of 3 jobs"
     classes = driver.execute_script(
-        "var c=[...document.querySelectorAll('#index thead tr:first-child th')].findIndex(t => t.textContent==='failure_class');"
+        "var c=[...document.querySelectorAll('#index thead tr:first-child th')].findIndex(t => t.dataset.col==='failure_class');"
         "return [...document.querySelectorAll('#index tbody tr')].map(r => r.children[c].textContent);"
     )
     assert classes == ["converged", "not-converged", "pending"]

@@ -112,7 +112,7 @@ def _index_table(manifest: pd.DataFrame, results: pd.DataFrame, views: set[int])
         for c in _INDEX_PARAMS
     ]
     cols += [("failure_class", "failure_class", "str"), ("failed_stage", "failed_stage", "num")]
-    cols += [(f"p99_s{k}", f"p99_von_mises_kPa stage {k}", "num") for k in STAGES]
+    cols += [(f"p99_s{k}", f"p99_von_mises_kPa_stage_{k}", "num") for k in STAGES]
     cols += [("view", "3D", "str")]
     rows = []
     for job in manifest.sort_values("job_index").itertuples(index=False):

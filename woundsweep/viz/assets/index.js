@@ -59,8 +59,9 @@
   filters.className = "filters";
   cols.forEach(function (col, c) {
     var th = document.createElement("th");
-    th.textContent = col.label;
+    th.textContent = col.label.replace(/_/g, "_\u200b");  // headers may wrap after "_"
     th.title = "sort by " + col.label;
+    th.setAttribute("data-col", col.key);
     th.addEventListener("click", function () {
       state.dir = state.sort === c ? -state.dir : 1;
       state.sort = c;

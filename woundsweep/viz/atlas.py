@@ -16,6 +16,7 @@ linearly with the jobs (and the views' surfaces).
 
 from __future__ import annotations
 
+import os
 import shutil
 import time
 from collections.abc import Callable
@@ -27,7 +28,6 @@ import numpy as np
 import pandas as pd
 
 from ..errors import StoreError
-from ..fsutil import atomic_write
 from ..schema import STAGES
 from ..sweep.grid import GEOMETRY_KEYS
 from .html import asset, fmt, json_script, page, plotly_js
@@ -77,8 +77,12 @@ def parse_views(spec: str, job_indices: list[int]) -> set[int]:
 
 
 def _write(path: Path, text: str) -> int:
+    """Write a page whole (a temporary name, then a rename); no fsync: the site is derived
+    from the run and rebuilt at will, and two fsyncs per page would dominate the build."""
     data = text.encode("utf-8")
-    atomic_write(path, lambda tmp: Path(tmp).write_bytes(data))
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    tmp.write_bytes(data)
+    os.replace(tmp, path)
     return len(data)
 
 
@@ -129,6 +133,13 @@ def _index_table(manifest: pd.DataFrame, results: pd.DataFrame, views: set[int])
         row.append("yes" if j in views else "")
         rows.append(row)
     return {"columns": [{"key": k, "label": h, "type": t} for k, h, t in cols], "rows": rows}
+
+
+def _int(v: Any) -> int:
+    try:
+        return 0 if v is None or v != v else int(v)
+    except (TypeError, ValueError):
+        return 0
 
 
 def _cell(v: Any) -> Any:
@@ -212,8 +223,10 @@ def build_atlas(
     man = run.manifest.sort_values(["geometry_id", "job_index"])
     order = sorted(int(j) for j in man["job_index"])
     where = {j: i for i, j in enumerate(order)}
-    by_job = {int(j): g for j, g in results.groupby("job_index")}
-    cells = {j: int(g["cells"].max()) if g["cells"].notna().any() else 0 for j, g in by_job.items()}
+    by_job: dict[int, list[dict[str, Any]]] = {}
+    for r in results.sort_values(["job_index", "stage"]).to_dict("records"):
+        by_job.setdefault(int(r["job_index"]), []).append(r)
+    cells = {j: max((_int(r["cells"]) for r in rs), default=0) for j, rs in by_job.items()}
     info = {
         "view_bytes": 0,
         "views": 0,
@@ -221,16 +234,21 @@ def build_atlas(
         "cells_total": sum(cells.get(j, 0) for j in views),
     }
     cache: dict[Any, Any] = {}
+    drawn: set[int] = set()
     head = '<script src="../assets/plotly.min.js"></script>\n'
     for n, job in enumerate(man.to_dict("records"), 1):
         j = int(job["job_index"])
-        rows = by_job.get(j, results.iloc[0:0])
+        rows = by_job.get(j, [])
         pos = where[j]
         prev = order[pos - 1] if pos else None
         nxt = order[pos + 1] if pos + 1 < len(order) else None
         jf, note = None, "3D view not built (woundsweep atlas --views selects the jobs)"
-        if rows.empty:
+        if not rows:
             note = "no result stored yet"
+        elif j in views and not rows[0]["fields_file"]:
+            note = (
+                f"no stored fields (`run --fields {rows[0]['fields']}`, {rows[0]['failure_class']})"
+            )
         elif j in views:
             jf = load_job(run.run_dir, job, rows, zone, cache)
         footer = "<h2>Log</h2>\n" + _log_html(run.run_dir / "logs" / f"job-{job['job_id']}.log")
@@ -247,12 +265,13 @@ def build_atlas(
         )
         total += size
         if jf is not None:
+            drawn.add(j)
             info["view_bytes"] += size
             info["views"] += 1
             info["cells_done"] += cells.get(j, 0)
         if progress is not None:
             progress(n, info)
-    data = _index_table(run.manifest, results, views)
+    data = _index_table(run.manifest, results, drawn)
     body = (
         f"<h1>woundsweep atlas <small>{escape(run.run_dir.name)} &middot; "
         f"{len(order)} jobs</small></h1>\n"

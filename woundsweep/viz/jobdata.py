@@ -3,7 +3,8 @@
 The store keeps the fields of a job in ``fields/<job_id>.h5`` (the stages `run --fields`
 kept) and its mesh once per geometry in ``fields/mesh-<geometry_id>.h5`` (points, cells, cell
 tags); the facets and facet tags come from the mesh cache ``meshes/<geometry_id>.npz``
-(rebuilt by gmsh if it is missing, and then checked against the stored mesh). Every stage of
+(rebuilt by gmsh if it is missing, and then checked against the stored mesh), which is also
+the mesh of a job without stored fields. Every stage of
 the job's rows gets a `StageNote` saying whether it has a field and, if not, why.
 """
 
@@ -21,7 +22,7 @@ from ..schema import StageStatus
 from ..solverfile import MESH_GROUP, STAGE_DATASETS, stage_group
 from .surface import closure_zone_facets
 
-__all__ = ["JobFields", "StageNote", "job_row", "load_job", "open_job", "stage_notes"]
+__all__ = ["JobFields", "StageNote", "job_row", "load_job", "open_job", "records", "stage_notes"]
 
 
 class StageNote(NamedTuple):
@@ -37,7 +38,7 @@ class JobFields(NamedTuple):
     """A job's reference mesh (input numbering), tags, closure zone and stored fields."""
 
     job: dict[str, Any]  # the manifest row
-    rows: pd.DataFrame  # the job's result rows, one per requested stage
+    rows: list[dict[str, Any]]  # the job's result rows, one per requested stage, by stage
     points: np.ndarray  # (n, 3) float64 mm
     cells: np.ndarray  # (m, 4) int64
     cell_tags: np.ndarray  # (m,) int32
@@ -56,11 +57,18 @@ def job_row(manifest: pd.DataFrame, job_index: int) -> dict[str, Any]:
     return {k: (v.item() if isinstance(v, np.generic) else v) for k, v in hit.iloc[0].items()}
 
 
-def stage_notes(rows: pd.DataFrame, stored: set[int]) -> list[StageNote]:
+def records(rows: pd.DataFrame | list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """A job's result rows as dicts sorted by stage (pandas rows are slow one by one)."""
+    if isinstance(rows, pd.DataFrame):
+        rows = rows.to_dict("records")
+    return sorted(rows, key=lambda r: int(r["stage"]))
+
+
+def stage_notes(rows: list[dict[str, Any]], stored: set[int]) -> list[StageNote]:
     """Per requested stage: stored or not, and the reason (not converged, not kept, not run)."""
     notes = []
-    fields = str(rows["fields"].iloc[0]) if len(rows) else ""
-    for _, r in rows.sort_values("stage").iterrows():
+    fields = str(rows[0]["fields"]) if rows else ""
+    for r in rows:
         k, status = int(r["stage"]), str(r["status"])
         if k in stored:
             notes.append(StageNote(k, status, True, ""))
@@ -92,6 +100,9 @@ def _read_h5(path: Path) -> tuple[dict[str, Any], dict[str, dict[str, np.ndarray
 def _mesh_arrays(run_dir: Path, job: dict[str, Any], groups: dict[str, Any], mesh_file: str):
     if MESH_GROUP in groups:
         mesh = groups[MESH_GROUP]
+    elif not groups:  # no fields stored (`run --fields none`, or no converged stage)
+        m = _cached_mesh(run_dir, job).mesh
+        return m.points, m.cells, m.cell_tags
     else:
         path = run_dir / "fields" / (mesh_file or f"mesh-{job['geometry_id']}.h5")
         if not path.exists():
@@ -109,12 +120,16 @@ def _mesh_arrays(run_dir: Path, job: dict[str, Any], groups: dict[str, Any], mes
         raise StoreError(f"the stored mesh of job {job['job_index']} lacks {err}") from None
 
 
-def _boundary(run_dir: Path, job: dict[str, Any], points: np.ndarray, cells: np.ndarray):
-    """Facets and facet tags from the mesh cache (built if missing), checked against the store."""
+def _cached_mesh(run_dir: Path, job: dict[str, Any]) -> Any:
     from ..mesh.cache import get_mesh
     from ..mesh.spec import GeometrySpec
 
-    got = get_mesh(run_dir, str(job["geometry_id"]), GeometrySpec.from_row(pd.Series(job)))
+    return get_mesh(run_dir, str(job["geometry_id"]), GeometrySpec.from_row(job))
+
+
+def _boundary(run_dir: Path, job: dict[str, Any], points: np.ndarray, cells: np.ndarray):
+    """Facets and facet tags from the mesh cache (built if missing), checked against the store."""
+    got = _cached_mesh(run_dir, job)
     m = got.mesh
     if m.points.shape != points.shape or m.cells.shape != cells.shape:
         raise StoreError(
@@ -131,7 +146,7 @@ def _boundary(run_dir: Path, job: dict[str, Any], points: np.ndarray, cells: np.
 def load_job(
     run_dir: str | Path,
     job: dict[str, Any],
-    rows: pd.DataFrame,
+    rows: pd.DataFrame | list[dict[str, Any]],
     zone: Any,
     cache: dict[Any, Any] | None = None,
 ) -> JobFields:
@@ -142,10 +157,11 @@ def load_job(
     dict the caller keeps) holds the last geometry's mesh for the next job of that geometry.
     """
     run_dir = Path(run_dir)
-    if rows.empty:
+    rows = records(rows)
+    if not rows:
         raise StoreError(f"job {job['job_index']} has no stored result yet (run `woundsweep run`)")
-    fields_file = str(rows["fields_file"].iloc[0] or "")
-    mesh_file = str(rows["mesh_file"].iloc[0] or "")
+    fields_file = str(rows[0]["fields_file"] or "")
+    mesh_file = str(rows[0]["mesh_file"] or "")
     groups: dict[str, Any] = {}
     stored: list[int] = []
     if fields_file:
@@ -175,7 +191,7 @@ def load_job(
         fields[k] = (u, vm)
     return JobFields(
         job=job,
-        rows=rows.sort_values("stage").reset_index(drop=True),
+        rows=rows,
         points=points,
         cells=cells,
         cell_tags=cell_tags,

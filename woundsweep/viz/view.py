@@ -15,12 +15,11 @@ from html import escape
 from typing import Any
 
 import numpy as np
-import pandas as pd
 
 from ..schema import STAGE_NAMES
 from ..sweep.grid import MANIFEST_COLUMNS
 from .html import JOB_COLUMNS, STAGE_COLUMNS, asset, json_script, page, plotly_js, table
-from .jobdata import JobFields, StageNote
+from .jobdata import JobFields, StageNote, records
 from .surface import max_cell_point, surface_of, zone_outline
 
 __all__ = ["job_body", "stage_rows", "view_data", "view_page"]
@@ -42,7 +41,7 @@ def view_data(jf: JobFields) -> dict[str, Any]:
     """The viewer's data: the surface once, then per requested stage its fields or a reason."""
     s = surface_of(jf.points, jf.cells, jf.facets, jf.zone)
     ref = jf.points[s.nodes]
-    rows = jf.rows.set_index("stage")
+    p99 = {int(r["stage"]): _num(r.get("p99_von_mises_kPa")) for r in jf.rows}
     stages = []
     for note in jf.notes:
         k = note.stage
@@ -52,9 +51,7 @@ def view_data(jf: JobFields) -> dict[str, Any]:
             "status": note.status,
             "stored": note.stored,
             "reason": note.reason,
-            "p99_von_mises_kPa": _num(rows.loc[k, "p99_von_mises_kPa"])
-            if k in rows.index
-            else None,
+            "p99_von_mises_kPa": p99.get(k),
         }
         if note.stored:
             u, vm = jf.fields[k]
@@ -86,11 +83,11 @@ def view_data(jf: JobFields) -> dict[str, Any]:
     }
 
 
-def stage_rows(rows: pd.DataFrame, notes: list[StageNote] | None) -> list[list[Any]]:
+def stage_rows(rows: list[dict[str, Any]], notes: list[StageNote] | None) -> list[list[Any]]:
     """The stage table's rows (`STAGE_COLUMNS`); ``field`` says stored or why not."""
     by_stage = {n.stage: n for n in notes or []}
     out = []
-    for _, r in rows.sort_values("stage").iterrows():
+    for r in records(rows):
         k = int(r["stage"])
         note = by_stage.get(k)
         field = "-" if note is None else ("stored" if note.stored else note.reason)
@@ -99,16 +96,15 @@ def stage_rows(rows: pd.DataFrame, notes: list[StageNote] | None) -> list[list[A
     return out
 
 
-def _param_table(job: dict[str, Any], rows: pd.DataFrame) -> str:
-    first = rows.iloc[0] if len(rows) else {}
+def _param_table(job: dict[str, Any], rows: list[dict[str, Any]]) -> str:
     items = [(c, job.get(c)) for c in MANIFEST_COLUMNS]
-    items += [(c, first.get(c)) for c in JOB_COLUMNS if len(rows)]
+    items += [(c, rows[0].get(c)) for c in JOB_COLUMNS if rows]
     return table(["parameter", "value"], items, "params")
 
 
 def job_body(
     job: dict[str, Any],
-    rows: pd.DataFrame,
+    rows: list[dict[str, Any]],
     jf: JobFields | None,
     *,
     view_note: str = "",
@@ -116,7 +112,7 @@ def job_body(
     footer: str = "",
 ) -> str:
     """A job's HTML: title, the 3D view (with ``jf``) or ``view_note``, stages, parameters."""
-    idx, fc = int(job["job_index"]), rows["failure_class"].iloc[0] if len(rows) else "not run"
+    idx, fc = int(job["job_index"]), rows[0]["failure_class"] if rows else "not run"
     title = f"<h1>job {idx} <small>{escape(str(job['job_id']))} &middot; {escape(str(fc))}</small></h1>\n"
     notes = jf.notes if jf is not None else None
     if jf is not None:

@@ -41,30 +41,28 @@ def test_index_holds_every_job_with_the_store_values(run: Path, tmp_path: Path, 
     out = tmp_path / "site"
     assert main(["atlas", str(run), "--out", str(out)]) == 0
     text = capsys.readouterr().out
-    assert "atlas of 3 jobs (2 stored), 3D views for 2" in text
+    assert "atlas of 6 jobs (3 stored), 3D views for 3" in text
     assert f"index: {out / 'index.html'}" in text
     data = _index_data(out)
     keys = [c["key"] for c in data["columns"]]
     rows = {r[0]: dict(zip(keys, r)) for r in data["rows"]}
-    assert sorted(rows) == [0, 1, 2]
+    assert sorted(rows) == [0, 1, 2, 3, 4, 5]
     res = read_results(run)
     for (j, k), v in res.set_index(["job_index", "stage"])["p99_von_mises_kPa"].items():
         got = rows[j][f"p99_s{k}"]
         assert (got is None) if v != v else got == pytest.approx(v, rel=1e-5)
-    assert [rows[j]["failure_class"] for j in (0, 1, 2)] == [
-        "converged",
-        "not-converged",
-        "pending",
-    ]
+    classes = [rows[j]["failure_class"] for j in range(6)]
+    assert classes == ["converged", "not-converged", "converged"] + ["pending"] * 3
+    assert rows[1]["failed_stage"] == 4 and rows[1]["p99_s3"] is not None
+    assert rows[1]["p99_s4"] is None
+    # Job 2 kept no fields (`run --fields none`): no view, and its page says why.
+    assert [rows[j]["view"] for j in range(6)] == ["yes", "yes", "", "", "", ""]
     assert (
-        rows[1]["failed_stage"] == 4 and rows[1]["p99_s3"] is not None and rows[1]["p99_s4"] is None
+        "no stored fields (`run --fields none`, converged)"
+        in (out / "jobs" / "job-2.html").read_text()
     )
-    assert [rows[j]["view"] for j in (0, 1, 2)] == ["yes", "yes", ""]
-    assert sorted(p.name for p in (out / "jobs").iterdir()) == [
-        "job-0.html",
-        "job-1.html",
-        "job-2.html",
-    ]
+    pages = sorted(p.name for p in (out / "jobs").iterdir())
+    assert pages == [f"job-{j}.html" for j in range(6)]
     assert sorted(p.name for p in (out / "assets").iterdir()) == [
         "index.js", "plotly.min.js", "style.css", "viewer.js",
     ]  # fmt: skip

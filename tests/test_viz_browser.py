@@ -154,25 +154,25 @@ def test_atlas_index_lists_sorts_filters(driver, site, tmp_path: Path) -> None:
     rows = lambda: driver.execute_script(  # noqa: E731
         "return Array.from(document.querySelectorAll('#index tbody tr')).map(r => Number(r.dataset.job));"
     )
-    assert rows() == [0, 1, 2]
-    assert driver.find_element("id", "count").text == "3 of 3 jobs"
+    assert rows() == [0, 1, 2, 3, 4, 5]
+    assert driver.find_element("id", "count").text == "6 of 6 jobs"
     classes = driver.execute_script(
         "var c=[...document.querySelectorAll('#index thead tr:first-child th')].findIndex(t => t.dataset.col==='failure_class');"
         "return [...document.querySelectorAll('#index tbody tr')].map(r => r.children[c].textContent);"
     )
-    assert classes == ["converged", "not-converged", "pending"]
+    assert classes == ["converged", "not-converged", "converged"] + ["pending"] * 3
     driver.find_elements("css selector", "#index thead tr:first-child th")[
         0
     ].click()  # job, descending
-    assert rows() == [2, 1, 0]
+    assert rows() == [5, 4, 3, 2, 1, 0]
     box = driver.find_element("css selector", "input[data-col='skin_type']")
     box.send_keys("soft")
-    assert rows() == [2]
+    assert rows() == [5, 4]
     box.clear()
     box.send_keys(" ")  # an input event with an empty filter
     p99 = driver.find_element("css selector", "input[data-col='p99_s6']")
     p99.send_keys(">0")
-    assert rows() == [0]
+    assert rows() == [2, 0]  # the jobs with a stage 6, still sorted by job descending
     assert console_errors(driver) == []
 
 
@@ -188,7 +188,7 @@ def test_atlas_job_page_draws_with_shared_plotly(driver, site, tmp_path: Path) -
     assert colour > 0.05
     assert "job 0 log line" in driver.find_element("css selector", "pre.log").text
     # The pending job's page has no view and says why.
-    _load(driver, site["atlas"] / "jobs" / "job-2.html")
+    _load(driver, site["atlas"] / "jobs" / "job-3.html")
     assert "no result stored yet" in driver.find_element("css selector", "p.noview").text
     assert console_errors(driver) == []
     assert np.isfinite(colour)

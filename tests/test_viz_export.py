@@ -122,17 +122,31 @@ def test_export_all_counts(store: Path, tmp_path: Path, capsys) -> None:
     out = tmp_path / "all"
     assert main(["export", str(store), "--all", "--out", str(out)]) == 0
     text = capsys.readouterr().out
-    assert "exported 2 jobs (7 stages)" in text
-    assert "1 jobs of the manifest have no stored result yet" in text
+    assert "exported 3 jobs (7 stages)" in text
+    assert "3 jobs of the manifest have no stored result yet" in text
     assert "2 stages not exported: not kept by `run --fields final`" in text
-    assert sorted(p.name for p in out.iterdir()) == ["job-0", "job-1"]
+    assert "6 stages not exported: not kept by `run --fields none`" in text
+    assert sorted(p.name for p in out.iterdir()) == ["job-0", "job-1", "job-2"]
+
+
+def test_job_without_fields_gets_its_mesh(store: Path, tmp_path: Path, capsys) -> None:
+    out = tmp_path / "none"
+    assert main(["export", str(store), "--job", "2", "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "stages none" in text and "stage 6 not kept by `run --fields none`" in text
+    assert list(ET.parse(out / "job-2" / "job-2.pvd").getroot().iter("DataSet")) == []
+    job = load_run(store).manifest.iloc[2]
+    mesh = load_mesh(mesh_path(store, job["geometry_id"]))
+    got = _read_vtu(out / "job-2" / "job-2_mesh.vtu")
+    np.testing.assert_array_equal(got["points"], mesh.points)
+    np.testing.assert_array_equal(got["facet_tag"][len(mesh.cells) :], mesh.facet_tags)
 
 
 @pytest.mark.parametrize(
     "args, needle",
     [
         (["--job", "7"], "no job 7"),
-        (["--job", "2"], "job 2 has no stored result"),
+        (["--job", "3"], "job 3 has no stored result"),
         (["--job", "0", "--all"], "exactly one of"),
         ([], "exactly one of"),
     ],

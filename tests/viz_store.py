@@ -1,13 +1,14 @@
 """A small real run directory with fields, for the viz tests (gmsh, no DOLFINx).
 
-`make_store` generates a one-geometry sweep (a coarse wedge wound, three skin types = three
-jobs), meshes it into the mesh cache, and stores through `Store.write_job` solver files
+`make_store` generates a one-geometry sweep (a coarse wedge wound, three skin types x two
+orientations = six jobs), meshes it into the mesh cache, and stores through `Store.write_job` solver files
 written by `write_solver_file` with known fields (`displacement`, `von_mises`):
 
 - job 0: converged, six stages, ``--fields all``;
 - job 1: not converged at stage 4 (max-iterations), ``--fields final``: stage 3 kept,
   stages 1-2 not kept, 5-6 not run;
-- job 2: no result stored (pending).
+- job 2: converged, six stages, ``--fields none``;
+- jobs 3-5: no result stored (pending).
 """
 
 from __future__ import annotations
@@ -35,7 +36,7 @@ SWEEP = {
         "wound_width_factor": [0.5],
         "mesh_size_factor": [0.3],
         "skin_type": ["normal", "stiff", "soft"],
-        "orientation_deg": [0],
+        "orientation_deg": [0, 90],
     },
     "shapes": {"wedge": {"wound_depth_factor": [0.3]}},
 }
@@ -79,11 +80,11 @@ def make_store(run_dir: str | Path) -> Path:
     manifest.to_parquet(rd / "manifest.parquet", index=False)
     store = Store(rd)
     store.ensure_dirs()
-    for job in manifest.to_dict("records")[:2]:
+    for job in manifest.to_dict("records")[:3]:
         j = int(job["job_index"])
         mesh = get_mesh(rd, job["geometry_id"], GeometrySpec.from_row(job)).mesh
         n_cells = len(mesh.cells)
-        last = 6 if j == 0 else 3
+        last = 3 if j == 1 else 6
         fields = {
             k: (
                 displacement(mesh.points, k, j).astype(np.float32),
@@ -98,10 +99,10 @@ def make_store(run_dir: str | Path) -> Path:
         attrs = {"job_id": job["job_id"], "job_index": j, "geometry_id": job["geometry_id"]}
         write_solver_file(path, attrs, mesh, rows, fields)
         out = read_solver_file(path, job["job_id"], (1, 6))
-        if j == 0:
-            outcome = _outcome(FailureClass.CONVERGED.value, out, int(ExitCode.OK))
-        else:
+        if j == 1:
             outcome = _outcome(FailureClass.NOT_CONVERGED.value, out, int(ExitCode.NOT_CONVERGED))
-        store.write_job(job, outcome, (1, 6), "all" if j == 0 else "final", "0/1")
+        else:
+            outcome = _outcome(FailureClass.CONVERGED.value, out, int(ExitCode.OK))
+        store.write_job(job, outcome, (1, 6), ("all", "final", "none")[j], "0/1")
         store.log_path(job["job_id"]).write_text(f"job {j} log line\n" * 3)
     return rd

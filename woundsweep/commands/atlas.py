@@ -31,9 +31,10 @@ def cmd(run_dir: Path, out: Path | None, views: str) -> None:
     """Write a static site: an index of every job (sortable, filterable), a page per job
     (stage table, log, 3D view) and the analysis' report and figures when they exist.
 
-    One copy of plotly.js (about 4.8 MB) serves every 3D view; a view costs about as many
-    bytes as its mesh has exterior triangles times stored stages times 16. The projected
-    size of the chosen views is shown while it builds and their size printed at the end.
+    One copy of plotly.js (about 4.8 MB) serves every 3D view; a view costs about
+    24 + 13 x (stored stages) bytes per exterior triangle of the job's mesh (about 130 kB for
+    a demo job). The projected size of the chosen views is shown while it builds and the
+    sizes are printed at the end.
     """
     from ..model.parameters import ClosureZone
     from ..sweep.grid import load_run
@@ -42,6 +43,8 @@ def cmd(run_dir: Path, out: Path | None, views: str) -> None:
 
     run = load_run(run_dir)
     out = out or run.run_dir / "atlas"
+    n_files = len(list((run.run_dir / "results").glob("job-*.parquet")))
+    click.echo(f"reading and validating {n_files} result files ...", err=True)
     results = read_results(run.run_dir)
     stored = set(int(j) for j in results["job_index"].unique())
     chosen = parse_views(views, [int(j) for j in run.manifest["job_index"]]) & stored

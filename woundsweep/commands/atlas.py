@@ -43,11 +43,12 @@ def cmd(run_dir: Path, out: Path | None, views: str) -> None:
 
     run = load_run(run_dir)
     out = out or run.run_dir / "atlas"
+    chosen = parse_views(views, [int(j) for j in run.manifest["job_index"]])
     n_files = len(list((run.run_dir / "results").glob("job-*.parquet")))
     click.echo(f"reading and validating {n_files} result files ...", err=True)
     results = read_results(run.run_dir)
     stored = set(int(j) for j in results["job_index"].unique())
-    chosen = parse_views(views, [int(j) for j in run.manifest["job_index"]]) & stored
+    chosen &= stored
     click.echo(
         f"atlas of {len(run.manifest)} jobs ({len(stored)} stored), 3D views for {len(chosen)}"
     )

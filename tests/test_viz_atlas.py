@@ -55,6 +55,7 @@ def test_index_holds_every_job_with_the_store_values(run: Path, tmp_path: Path, 
     assert classes == ["converged", "not-converged", "converged"] + ["pending"] * 3
     assert rows[1]["failed_stage"] == 4 and rows[1]["p99_s3"] is not None
     assert rows[1]["p99_s4"] is None
+    assert [rows[j]["converged_stages"] for j in range(6)] == [6, 3, 6, None, None, None]
     # Job 2 kept no fields (`run --fields none`): no view, and its page says why.
     assert [rows[j]["view"] for j in range(6)] == ["yes", "yes", "", "", "", ""]
     assert (

@@ -93,6 +93,24 @@ def test_checks_can_fail(driver, tmp_path: Path) -> None:
     assert colour < 0.01
 
 
+def test_missing_chromium_skips_with_the_reason(monkeypatch) -> None:
+    # Never silently: no browser and no way to install one is a skip that says why, and a
+    # warning that shows in pytest's summary.
+    import browser
+
+    monkeypatch.setattr(browser.shutil, "which", lambda name: None)
+    with pytest.warns(UserWarning, match="browser tests skipped: no apt-get"):
+        with pytest.raises(pytest.skip.Exception, match="no apt-get"):
+            browser.start_chromium()
+    monkeypatch.setattr(
+        browser.shutil, "which", lambda name: "/usr/bin/apt-get" if name == "apt-get" else None
+    )
+    monkeypatch.setattr(browser.os, "geteuid", lambda: 1000)
+    with pytest.warns(UserWarning, match="needs root"):
+        with pytest.raises(pytest.skip.Exception, match="needs root"):
+            browser.start_chromium()
+
+
 def test_view_renders_and_switches_stage(driver, site, tmp_path: Path) -> None:
     console_errors(driver)  # drop earlier pages' messages
     _load(driver, site["view"])

@@ -2,7 +2,8 @@
 
 Layout of ``OUT/``::
 
-    index.html             every job of the manifest: parameters, failure class, p99 per stage
+    index.html             every job of the manifest: parameters, failure class, failed and
+                           converged stages, p99 per stage
                            (sortable, filterable, paged by assets/index.js)
     jobs/job-<index>.html  per job: stage table, parameters, its log (the last LOG_BYTES) and,
                            for the jobs chosen by ``views``, its 3D view
@@ -28,7 +29,7 @@ import numpy as np
 import pandas as pd
 
 from ..errors import StoreError
-from ..schema import STAGES
+from ..schema import STAGES, StageStatus
 from ..sweep.grid import GEOMETRY_KEYS
 from .html import asset, fmt, json_script, page, plotly_js
 from .jobdata import load_job
@@ -110,12 +111,14 @@ def _index_table(manifest: pd.DataFrame, results: pd.DataFrame, views: set[int])
         index="job_index", columns="stage", values="p99_von_mises_kPa", aggfunc="first"
     )
     jobs = results.drop_duplicates("job_index").set_index("job_index")
+    converged = (results["status"] == StageStatus.CONVERGED).groupby(results["job_index"]).sum()
     cols = [("job_index", "job", "num")]
     cols += [
         (c, c, "num" if pd.api.types.is_numeric_dtype(manifest[c]) else "str")
         for c in _INDEX_PARAMS
     ]
     cols += [("failure_class", "failure_class", "str"), ("failed_stage", "failed_stage", "num")]
+    cols += [("converged_stages", "converged_stages", "num")]
     cols += [(f"p99_s{k}", f"p99_von_mises_kPa_stage_{k}", "num") for k in STAGES]
     cols += [("view", "3D", "str")]
     rows = []
@@ -128,6 +131,7 @@ def _index_table(manifest: pd.DataFrame, results: pd.DataFrame, views: set[int])
             row.append(_cell(v))
         row.append(str(jobs.at[j, "failure_class"]) if stored else "pending")
         row.append(_cell(jobs.at[j, "failed_stage"]) if stored else None)
+        row.append(int(converged.at[j]) if stored else None)
         for k in STAGES:
             row.append(_cell(p99.at[j, k]) if j in p99.index and k in p99.columns else None)
         row.append("yes" if j in views else "")

@@ -89,7 +89,7 @@ def test_views_subset_and_none(run: Path, tmp_path: Path, capsys) -> None:
     out2 = tmp_path / "none"
     assert main(["atlas", str(run), "--out", str(out2), "--views", "none"]) == 0
     assert not (out2 / "assets" / "plotly.min.js").exists()
-    assert "3D views of 0 jobs" in capsys.readouterr().out
+    assert "pages with a 3D view: 0 jobs" in capsys.readouterr().out
 
 
 def test_parse_views() -> None:

@@ -68,6 +68,7 @@ def cmd(run_dir: Path, out: Path | None, views: str) -> None:
     per = f", {s.view_bytes / s.views / 1e3:.0f} kB each" if s.views else ""
     click.echo(
         f"wrote {s.jobs} job pages in {s.seconds:.1f} s; site {_mb(s.total_bytes)}: "
-        f"3D views of {s.views} jobs {_mb(s.view_bytes)}{per}, plotly.js {_mb(s.plotly_bytes)} once"
+        f"pages with a 3D view: {s.views} jobs, {_mb(s.view_bytes)}{per}; "
+        f"plotly.js {_mb(s.plotly_bytes)} once"
     )
     click.echo(f"index: {s.index}")

@@ -41,7 +41,9 @@ def test_index_holds_every_job_with_the_store_values(run: Path, tmp_path: Path, 
     out = tmp_path / "site"
     assert main(["atlas", str(run), "--out", str(out)]) == 0
     text = capsys.readouterr().out
-    assert "atlas of 6 jobs (3 stored), 3D views for 3" in text
+    assert (
+        "atlas of 6 jobs (3 stored), 3D views for 2 (1 chosen jobs have no stored fields)" in text
+    )
     assert f"index: {out / 'index.html'}" in text
     data = _index_data(out)
     keys = [c["key"] for c in data["columns"]]

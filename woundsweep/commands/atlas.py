@@ -48,9 +48,14 @@ def cmd(run_dir: Path, out: Path | None, views: str) -> None:
     click.echo(f"reading and validating {n_files} result files ...", err=True)
     results = read_results(run.run_dir)
     stored = set(int(j) for j in results["job_index"].unique())
+    has_fields = results["fields_file"].fillna("").astype(str) != ""
+    with_fields = set(int(j) for j in results.loc[has_fields, "job_index"].unique())
     chosen &= stored
+    no_fields = len(chosen - with_fields)
+    chosen &= with_fields
     click.echo(
         f"atlas of {len(run.manifest)} jobs ({len(stored)} stored), 3D views for {len(chosen)}"
+        + (f" ({no_fields} chosen jobs have no stored fields)" if no_fields else "")
     )
     bar = tqdm(total=len(run.manifest), desc="atlas", unit="job")
 

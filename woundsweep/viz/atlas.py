@@ -249,7 +249,7 @@ def build_atlas(
         jf, note = None, "3D view not built (woundsweep atlas --views selects the jobs)"
         if not rows:
             note = "no result stored yet"
-        elif j in views and not rows[0]["fields_file"]:
+        elif not rows[0]["fields_file"]:
             note = (
                 f"no stored fields (`run --fields {rows[0]['fields']}`, {rows[0]['failure_class']})"
             )

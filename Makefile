@@ -24,14 +24,17 @@ test-dolfinx-latest: setup
 	bash scripts/dolfinx-latest.sh $(if $(PYTEST_ARGS),-- $(PYTEST_ARGS))
 
 DEMO_STAGES ?= 1-6
+DEMO_FIELDS ?= all
 
 demo: setup
 	$(WS) generate sweeps/demo.yaml --out $(DEMO_DIR)
-	$(WS) run $(DEMO_DIR) --stages $(DEMO_STAGES)
+	$(WS) run $(DEMO_DIR) --stages $(DEMO_STAGES) --fields $(DEMO_FIELDS)
 	$(WS) status $(DEMO_DIR)
 	$(WS) analyze $(DEMO_DIR)
 	@echo "demo: results in $(DEMO_DIR)/results (pandas.read_parquet), fields in $(DEMO_DIR)/fields,"
 	@echo "      analysis in $(DEMO_DIR)/analysis (report.md, metrics.json, figures)"
+	$(WS) atlas $(DEMO_DIR) --out $(DEMO_DIR)/atlas
+	@echo "demo: atlas index: $(abspath $(DEMO_DIR))/atlas/index.html (open it in a browser)"
 
 bench: setup
 	@for b in benchmarks/bench_*.py; do echo "== $$b"; $(PY) $$b || exit 1; done

@@ -54,6 +54,18 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "woundsweep.commands.slurm",
         "SLURM scripts for the sweep: warm-up, job array of shards, follow-up; --submit.",
     ),
+    "export": (
+        "woundsweep.commands.export",
+        "ParaView series (PVD + VTU) of stored jobs: displacement, von Mises, tags.",
+    ),
+    "view": (
+        "woundsweep.commands.view",
+        "One job's interactive 3D view as a self-contained HTML file.",
+    ),
+    "atlas": (
+        "woundsweep.commands.atlas",
+        "Static site of a run: index of every job, job pages with 3D views, analysis.",
+    ),
 }
 
 

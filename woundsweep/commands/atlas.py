@@ -1,0 +1,79 @@
+"""``woundsweep atlas RUN_DIR --out DIR``: the static site of a run (opens from disk)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+from tqdm import tqdm
+
+__all__ = ["cmd"]
+
+
+def _mb(n: float) -> str:
+    return f"{n / 1e6:.1f} MB"
+
+
+@click.command("atlas")
+@click.argument("run_dir", type=click.Path(file_okay=False, path_type=Path))
+@click.option(
+    "--out",
+    type=click.Path(file_okay=False, path_type=Path),
+    help="Directory of the site (default RUN_DIR/atlas).",
+)
+@click.option(
+    "--views",
+    default="all",
+    show_default=True,
+    help="Jobs with a 3D view: all, none, or job indices and ranges such as 0-9,15.",
+)
+def cmd(run_dir: Path, out: Path | None, views: str) -> None:
+    """Write a static site: an index of every job (sortable, filterable), a page per job
+    (stage table, log, 3D view) and the analysis' report and figures when they exist.
+
+    One copy of plotly.js (about 4.8 MB) serves every 3D view; a view costs about
+    24 + 13 x (stored stages) bytes per exterior triangle of the job's mesh (about 130 kB for
+    a demo job). The projected size of the chosen views is shown while it builds and the
+    sizes are printed at the end.
+    """
+    from ..model.parameters import ClosureZone
+    from ..sweep.grid import load_run
+    from ..sweep.results import read_results
+    from ..viz.atlas import build_atlas, parse_views
+
+    run = load_run(run_dir)
+    out = out or run.run_dir / "atlas"
+    chosen = parse_views(views, [int(j) for j in run.manifest["job_index"]])
+    n_files = len(list((run.run_dir / "results").glob("job-*.parquet")))
+    click.echo(f"reading and validating {n_files} result files ...", err=True)
+    results = read_results(run.run_dir)
+    stored = set(int(j) for j in results["job_index"].unique())
+    has_fields = results["fields_file"].fillna("").astype(str) != ""
+    with_fields = set(int(j) for j in results.loc[has_fields, "job_index"].unique())
+    chosen &= stored
+    no_fields = len(chosen - with_fields)
+    chosen &= with_fields
+    click.echo(
+        f"atlas of {len(run.manifest)} jobs ({len(stored)} stored), 3D views for {len(chosen)}"
+        + (f" ({no_fields} chosen jobs have no stored fields)" if no_fields else "")
+    )
+    bar = tqdm(total=len(run.manifest), desc="atlas", unit="job")
+
+    def progress(n: int, info: dict) -> None:
+        bar.update(1)
+        if info["views"] and info["cells_done"]:
+            est = info["view_bytes"] / info["cells_done"] * info["cells_total"]
+            bar.set_postfix_str(f"views {_mb(info['view_bytes'])} of ~{_mb(est)}", refresh=False)
+
+    zone = ClosureZone.from_sweep(run.sweep.stages)
+    try:
+        s = build_atlas(run, results, out, chosen, zone, progress)
+    finally:
+        bar.close()
+    per = f", {s.view_bytes / s.views / 1e3:.0f} kB each" if s.views else ""
+    click.echo(
+        f"wrote {s.jobs} job pages in {s.seconds:.1f} s; site {_mb(s.total_bytes)}: "
+        f"pages with a 3D view: {s.views} jobs, {_mb(s.view_bytes)}{per}; "
+        f"plotly.js {_mb(s.plotly_bytes)} once"
+    )
+    click.echo(f"index: {s.index}")

@@ -1,0 +1,147 @@
+"""The 3D view of one job: the deformed exterior surface coloured by the cellwise von Mises
+stress (kPa), one entry per requested stage, the closure zone outlined and the maximum marked.
+
+`view_data` turns a `JobFields` into the viewer's data (arrays as base64 little-endian
+float32 / int32, decoded by ``assets/viewer.js``); `job_body` is the HTML of a job (view,
+stage table, parameters) shared by ``woundsweep view`` and the atlas' job pages; `view_page`
+is the self-contained page of ``woundsweep view`` (plotly.js and the viewer inlined).
+"""
+
+from __future__ import annotations
+
+import base64
+import math
+from html import escape
+from typing import Any
+
+import numpy as np
+
+from ..schema import STAGE_NAMES
+from ..sweep.grid import MANIFEST_COLUMNS
+from .html import JOB_COLUMNS, STAGE_COLUMNS, asset, json_script, page, plotly_js, table
+from .jobdata import JobFields, StageNote, records
+from .surface import max_cell_point, surface_of, zone_outline
+
+__all__ = ["job_body", "stage_rows", "view_data", "view_page"]
+
+
+def _b64(a: np.ndarray, dtype: str) -> str:
+    return base64.b64encode(np.ascontiguousarray(a, dtype=dtype).tobytes()).decode("ascii")
+
+
+def _num(v: Any) -> float | None:
+    try:
+        f = float(v)
+    except (TypeError, ValueError):
+        return None
+    return f if math.isfinite(f) else None
+
+
+def view_data(jf: JobFields) -> dict[str, Any]:
+    """The viewer's data: the surface once, then per requested stage its fields or a reason."""
+    s = surface_of(jf.points, jf.cells, jf.facets, jf.zone)
+    ref = jf.points[s.nodes]
+    p99 = {int(r["stage"]): _num(r.get("p99_von_mises_kPa")) for r in jf.rows}
+    stages = []
+    for note in jf.notes:
+        k = note.stage
+        entry: dict[str, Any] = {
+            "stage": k,
+            "label": f"stage {k}: {STAGE_NAMES.get(k, '')}",
+            "status": note.status,
+            "stored": note.stored,
+            "reason": note.reason,
+            "p99_von_mises_kPa": p99.get(k),
+        }
+        if note.stored:
+            u, vm = jf.fields[k]
+            tri_vm = np.asarray(vm, np.float64)[s.owner]
+            cell, mref, mdef = max_cell_point(jf.points, jf.cells, u, vm)
+            entry.update(
+                u=_b64(np.asarray(u)[s.nodes], "<f4"),
+                vm=_b64(tri_vm, "<f4"),
+                surface_max_kPa=float(np.nanmax(tri_vm)),
+                max={
+                    "value_kPa": float(vm[cell]),
+                    "cell": cell,
+                    "reference_mm": [float(c) for c in mref],
+                    "deformed_mm": [float(c) for c in mdef],
+                },
+            )
+        stages.append(entry)
+    return {
+        "job_index": int(jf.job["job_index"]),
+        "job_id": str(jf.job["job_id"]),
+        "n_nodes": int(len(s.nodes)),
+        "n_triangles": int(len(s.triangles)),
+        "x": _b64(ref[:, 0], "<f4"),
+        "y": _b64(ref[:, 1], "<f4"),
+        "z": _b64(ref[:, 2], "<f4"),
+        "tri": _b64(s.triangles, "<i4"),
+        "outline": _b64(zone_outline(s.triangles, s.zone), "<i4"),
+        "stages": stages,
+    }
+
+
+def stage_rows(rows: list[dict[str, Any]], notes: list[StageNote] | None) -> list[list[Any]]:
+    """The stage table's rows (`STAGE_COLUMNS`); ``field`` says stored or why not."""
+    by_stage = {n.stage: n for n in notes or []}
+    out = []
+    for r in records(rows):
+        k = int(r["stage"])
+        note = by_stage.get(k)
+        field = "-" if note is None else ("stored" if note.stored else note.reason)
+        extra = {"stage_name": STAGE_NAMES.get(k, ""), "field": field}
+        out.append([extra[c] if c in extra else r.get(c) for c, _ in STAGE_COLUMNS])
+    return out
+
+
+def _param_table(job: dict[str, Any], rows: list[dict[str, Any]]) -> str:
+    items = [(c, job.get(c)) for c in MANIFEST_COLUMNS]
+    items += [(c, rows[0].get(c)) for c in JOB_COLUMNS if rows]
+    return table(["parameter", "value"], items, "params")
+
+
+def job_body(
+    job: dict[str, Any],
+    rows: list[dict[str, Any]],
+    jf: JobFields | None,
+    *,
+    view_note: str = "",
+    header: str = "",
+    footer: str = "",
+) -> str:
+    """A job's HTML: title, the 3D view (with ``jf``) or ``view_note``, stages, parameters."""
+    idx, fc = int(job["job_index"]), rows[0]["failure_class"] if rows else "not run"
+    title = f"<h1>job {idx} <small>{escape(str(job['job_id']))} &middot; {escape(str(fc))}</small></h1>\n"
+    notes = jf.notes if jf is not None else None
+    if jf is not None:
+        view = (
+            '<div class="controls"><label>stage <select id="stage"></select></label>'
+            '<label><input type="checkbox" id="clip"> colour scale up to p99</label>'
+            '<label><input type="checkbox" id="seethrough"> see-through surface</label>'
+            '<span id="note"></span></div>\n<div id="plot"></div>\n'
+            '<p class="legend">Deformed exterior surface (displacement at scale 1), each '
+            "triangle coloured by the von Mises stress of the tetrahedron it bounds; black "
+            "outline: the closure zone; red diamond: the cell of the largest von Mises "
+            "(deformed midpoint). Lengths in mm.</p>\n" + json_script("wsdata", view_data(jf))
+        )
+    else:
+        view = f'<p class="noview">{escape(view_note)}</p>\n'
+    return (
+        header
+        + title
+        + view
+        + "<h2>Stages</h2>\n"
+        + table([h for _, h in STAGE_COLUMNS], stage_rows(rows, notes), "stages")
+        + "<h2>Parameters</h2>\n"
+        + _param_table(job, rows)
+        + footer
+    )
+
+
+def view_page(jf: JobFields) -> str:
+    """The self-contained HTML of ``woundsweep view``: no network needed to open it."""
+    body = job_body(jf.job, jf.rows, jf) + f"<script>\n{asset('viewer.js')}</script>\n"
+    head = f"<script>\n{plotly_js()}\n</script>\n"
+    return page(f"woundsweep job {int(jf.job['job_index'])}", body, head)

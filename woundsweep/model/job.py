@@ -221,7 +221,8 @@ def solve_job(
     if len(hit) != 1:
         raise SolverError(f"job {job_index}: not in the manifest (0..{len(manifest) - 1})")
     row = manifest.loc[hit[0]]
-    spec = GeometrySpec.from_row(row)
+    zone = ClosureZone.from_sweep(run.sweep.stages)
+    spec = GeometrySpec.from_row(row, zone)  # the closure zone is part of the mesh
     mesh = get_mesh(run.run_dir, str(row["geometry_id"]), spec).mesh
     skin, angle = str(row["skin_type"]), float(row["orientation_deg"])
     if skin not in run.sweep.materials["skin_types"]:
@@ -232,7 +233,7 @@ def solve_job(
         model = WoundModel(
             mesh,
             quadrature_degree=int(solver.get("quadrature_degree", 1)),
-            zone=ClosureZone.from_sweep(run.sweep.stages),
+            zone=zone,
             settings=NewtonSettings.from_mapping(solver),
             jit=jit,
             contact_penalty_GPa=tuple(run.sweep.stages["contact_penalty_GPa"]),

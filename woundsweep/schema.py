@@ -136,6 +136,8 @@ class StageResult(NamedTuple):
     n_penetrating: int | None = None  # contact stages (4-6) only
     max_penetration_mm: float | None = None  # contact stages only
     contact_force_mN: float | None = None  # contact stages only
+    # Stage 3 only: 1 if the flanks pass through each other (closure gap < 0), else 0.
+    interpenetrating: int | None = None
     residual_norm: float | None = None
     dofs: int | None = None
     cells: int | None = None

@@ -33,6 +33,9 @@ __all__ = [
     "JobOutcome",
     "NotConvergedError",
     "StageRecord",
+    "job_model",
+    "job_row",
+    "job_spec",
     "run_stages",
     "solve_job",
     "stress_summary",
@@ -204,6 +207,51 @@ def write_output(
     write_solver_file(path, attrs, mesh, rows, fields)
 
 
+def job_row(run: Any, job_index: int) -> Any:
+    """The manifest row of ``job_index`` in a `Run` (SolverError if it has none)."""
+    manifest = run.manifest
+    hit = manifest.index[manifest["job_index"] == int(job_index)]
+    if len(hit) != 1:
+        raise SolverError(f"job {job_index}: not in the manifest (0..{len(manifest) - 1})")
+    return manifest.loc[hit[0]]
+
+
+def job_spec(run: Any, row: Any) -> Any:
+    """The `GeometrySpec` of a manifest row with the sweep's closure zone (part of the mesh)."""
+    from ..mesh.spec import GeometrySpec
+    from .parameters import ClosureZone
+
+    return GeometrySpec.from_row(row, ClosureZone.from_sweep(run.sweep.stages))
+
+
+def job_model(run: Any, row: Any, mesh: Any, jit: dict[str, Any] | None = None) -> tuple[Any, Any]:
+    """The `WoundModel` of a manifest row on ``mesh`` with the run's settings, and the job's
+    materials (GeometryError for a mesh that does not fit the contract)."""
+    from .materials import JobMaterials
+    from .parameters import ClosureZone
+    from .stages import WoundModel
+
+    job_index = int(row["job_index"])
+    skin, angle = str(row["skin_type"]), float(row["orientation_deg"])
+    if skin not in run.sweep.materials["skin_types"]:
+        raise SolverError(f"job {job_index}: unknown skin type {skin!r}")
+    materials = JobMaterials.from_sweep(run.sweep.materials, skin, angle)
+    solver = run.sweep.solver
+    try:
+        model = WoundModel(
+            mesh,
+            quadrature_degree=int(solver.get("quadrature_degree", 1)),
+            zone=ClosureZone.from_sweep(run.sweep.stages),
+            settings=NewtonSettings.from_mapping(solver),
+            jit=jit,
+            contact_penalty_GPa=tuple(run.sweep.stages["contact_penalty_GPa"]),
+            closure_load=str(run.sweep.stages["closure_load"]),
+        )
+    except ValueError as err:  # the mesh's tags or numbering do not fit the contract
+        raise GeometryError(f"job {job_index}: unusable mesh: {err}") from None
+    return model, materials
+
+
 def solve_job(
     run_dir: str | Path,
     job_index: int,
@@ -218,38 +266,13 @@ def solve_job(
     reported and written to ``out`` (default ``RUN_DIR/solve/job_<N>.h5``).
     """
     from ..mesh.cache import get_mesh
-    from ..mesh.spec import GeometrySpec
     from ..sweep.grid import load_run
-    from .materials import JobMaterials
-    from .parameters import ClosureZone
-    from .stages import WoundModel
 
     run = load_run(run_dir)
-    manifest = run.manifest
-    hit = manifest.index[manifest["job_index"] == int(job_index)]
-    if len(hit) != 1:
-        raise SolverError(f"job {job_index}: not in the manifest (0..{len(manifest) - 1})")
-    row = manifest.loc[hit[0]]
-    zone = ClosureZone.from_sweep(run.sweep.stages)
-    spec = GeometrySpec.from_row(row, zone)  # the closure zone is part of the mesh
+    row = job_row(run, job_index)
+    spec = job_spec(run, row)
     mesh = get_mesh(run.run_dir, str(row["geometry_id"]), spec).mesh
-    skin, angle = str(row["skin_type"]), float(row["orientation_deg"])
-    if skin not in run.sweep.materials["skin_types"]:
-        raise SolverError(f"job {job_index}: unknown skin type {skin!r}")
-    materials = JobMaterials.from_sweep(run.sweep.materials, skin, angle)
-    solver = run.sweep.solver
-    try:
-        model = WoundModel(
-            mesh,
-            quadrature_degree=int(solver.get("quadrature_degree", 1)),
-            zone=zone,
-            settings=NewtonSettings.from_mapping(solver),
-            jit=jit,
-            contact_penalty_GPa=tuple(run.sweep.stages["contact_penalty_GPa"]),
-            closure_load=str(run.sweep.stages["closure_load"]),
-        )
-    except ValueError as err:  # the mesh's tags or numbering do not fit the contract
-        raise GeometryError(f"job {job_index}: unusable mesh: {err}") from None
+    model, materials = job_model(run, row, mesh, jit)
     records = run_stages(model, materials, stages[1], echo=echo)
     reported = [r for r in records if r.result.stage >= stages[0]]
     ok = all(r.result.status == StageStatus.CONVERGED for r in records)

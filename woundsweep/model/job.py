@@ -28,6 +28,7 @@ import numpy as np
 from ..errors import GeometryError, SolverError, WoundsweepError
 from ..schema import ExitCode, StageResult, StageStatus
 from ..solver.settings import NewtonSettings
+from .profiles import line_maxima, locate_cells, profile_lines, sample_profiles
 
 __all__ = [
     "JobOutcome",
@@ -56,6 +57,8 @@ class StageRecord(NamedTuple):
     extra: dict[str, float | int | None]
     displacement_mm: np.ndarray | None
     von_mises_kPa: np.ndarray | None
+    # Von Mises on the `profiles` lines, (3, PROFILE_POINTS), if converged.
+    profiles_kPa: np.ndarray | None = None
 
 
 class JobOutcome(NamedTuple):
@@ -127,6 +130,8 @@ def run_stages(
     dofs = d.n_dofs
     cells = len(d.cells)
     cell_input_order = np.argsort(d.cell_input)
+    lines = profile_lines(d)
+    line_cells = locate_cells(d, lines.reshape(-1, 3)).reshape(lines.shape[:2])
     records: list[StageRecord] = []
     failed = False
     for k in range(1, last_stage + 1):
@@ -168,11 +173,15 @@ def run_stages(
             "factor_time_s": float(s.factor_time_s),
         }
         extra.update({key: v for key, v in out.diagnostics.items() if key not in result._fields})
+        profiles = sample_profiles(line_cells, vm) if ok else None
+        if profiles is not None:
+            extra.update(line_maxima(lines, profiles))
         rec = StageRecord(
             result,
             {key: _finite(v) for key, v in extra.items()},
             model.displacement_input().astype(np.float32) if ok else None,
             vm[cell_input_order].astype(np.float32) if ok else None,
+            profiles,
         )
         records.append(rec)
         if echo is not None:
@@ -187,8 +196,10 @@ def write_output(
     mesh: Any,
     records: list[StageRecord],
     first_stage: int = 1,
+    points: np.ndarray | None = None,
 ) -> None:
-    """Write the job's solver file atomically (records before ``first_stage`` are left out)."""
+    """Write the job's solver file atomically (records before ``first_stage`` are left out);
+    ``points`` are the profile lines' coordinates (`profiles.profile_lines`)."""
     from .. import compat
     from ..solverfile import write_solver_file
 
@@ -203,8 +214,16 @@ def write_output(
         for r in keep
         if r.displacement_mm is not None and r.von_mises_kPa is not None
     }
+    profiles = {
+        r.result.stage: {"profile_von_mises_kPa": r.profiles_kPa.astype(np.float32)}
+        for r in keep
+        if r.result.stage in fields and r.profiles_kPa is not None
+    }
+    if profiles and points is not None:
+        for group in profiles.values():
+            group["profile_points_mm"] = np.asarray(points, dtype=np.float32)
     attrs = {**attrs, "dolfinx_version": compat.DOLFINX_VERSION}
-    write_solver_file(path, attrs, mesh, rows, fields)
+    write_solver_file(path, attrs, mesh, rows, fields, profiles)
 
 
 def job_row(run: Any, job_index: int) -> Any:
@@ -283,6 +302,8 @@ def solve_job(
         "geometry_id": str(row["geometry_id"]),
         "jit_time_s": float(model.jit_time_s),
     }
-    write_output(path, attrs, mesh, records, first_stage=stages[0])
+    write_output(
+        path, attrs, mesh, records, first_stage=stages[0], points=profile_lines(model.domain)
+    )
     code = ExitCode.OK if ok else ExitCode.NOT_CONVERGED
     return JobOutcome(reported, code, path, model.jit_time_s)

@@ -9,6 +9,7 @@ RUN_DIR/convergence/job_<N>.json and job_<N>.png.
 from __future__ import annotations
 
 import logging
+import math
 import os
 from pathlib import Path
 from typing import Any
@@ -30,7 +31,7 @@ _SHORT = {
 
 
 def _num(v: Any, spec: str = ".4g") -> str:
-    return "-" if v is None else format(v, spec)
+    return "-" if v is None or not math.isfinite(v) else format(v, spec)
 
 
 def study_lines(study: dict[str, Any]) -> list[str]:

@@ -159,10 +159,11 @@ def draw_study(study: dict[str, Any], path: Path) -> Path:
             if all(y is None for y in ys):
                 continue
             ys = [math.nan if y is None else y for y in ys]
-            (line,) = ax.plot(sizes, ys, "o-", label=f"stage {stage}")
+            color = f"C{int(stage) - 1}"  # one colour per stage in every panel
+            ax.plot(sizes, ys, "o-", color=color, label=f"stage {stage}")
             fin = study["studies"].get(stage, {}).get(q)
             if fin and fin[-1]["kind"] == "monotone":
-                ax.plot([0.0], [fin[-1]["extrapolated"]], "o", mfc="none", color=line.get_color())
+                ax.plot([0.0], [fin[-1]["extrapolated"]], "o", mfc="none", color=color)
         ax.set_xlabel("relative element size s = (0.5 / m)^(2/3)")
         ax.set_ylabel(q)
         ax.set_xlim(left=0.0)

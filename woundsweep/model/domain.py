@@ -2,9 +2,9 @@
 
 `WoundDomain` holds the node and facet sets of the boundary conditions (x and y faces, deep
 face), the wound's mirror plane and depth, the closure zone on both flanks (the mesh's
-WOUND_ZONE facets and their nodes), the two point
-constraints that remove rigid in-plane motion, the facet tags of the solver's integrals, and
-the cellwise kinematics of P1 fields (gradient, det F). Node indices are DOLFINx dof-node
+WOUND_ZONE facets and their nodes), the two point constraints that remove rigid in-plane
+motion, the facet tags of the solver's integrals, and the cellwise kinematics of P1 fields
+(gradient, det F). Node indices are DOLFINx dof-node
 indices (dof ``3 i + c`` is component c of node i); ``input_node`` maps input points to them.
 """
 

@@ -26,16 +26,13 @@ def domain() -> SimpleNamespace:
     mesh = build_mesh(SPEC)
     X, cells = mesh.points, mesh.cells
     Dm = np.transpose(X[cells][:, 1:, :] - X[cells][:, :1, :], (0, 2, 1))
-    lo, hi = X.min(axis=0), X.max(axis=0)
     return SimpleNamespace(
-        X=X, cell_nodes=cells, Dm_inv=np.linalg.inv(Dm), bbox=(lo, hi),
-        half_length_y=0.5 * (hi[1] - lo[1]), y_c=0.0, z_top=float(hi[2]),
-        midpoints=X[cells].mean(axis=1),
-    )  # fmt: skip
+        X=X, cell_nodes=cells, Dm_inv=np.linalg.inv(Dm), midpoints=X[cells].mean(axis=1)
+    )
 
 
 def test_lines_are_the_papers(domain) -> None:
-    pts = profile_lines(domain)
+    pts = profile_lines(domain.X)
     assert pts.shape == (3, PROFILE_POINTS, 3)
     L, w, T = 2.0, 1.0, 2.0
     np.testing.assert_allclose(pts[0, [0, -1]], [[0, -L, 0], [0, L, 0]], atol=1e-12)
@@ -54,7 +51,7 @@ def test_located_cells_hold_their_points(domain) -> None:
 
 
 def test_sampled_values_come_from_the_cell_at_the_point(domain) -> None:
-    pts = profile_lines(domain)
+    pts = profile_lines(domain.X)
     cells = locate_cells(domain, pts.reshape(-1, 3)).reshape(3, -1)
     # A cellwise field equal to the cell's midpoint x: sampled, it is within one cell of x.
     prof = sample_profiles(cells, domain.midpoints[:, 0])
@@ -68,7 +65,7 @@ def test_sampled_values_come_from_the_cell_at_the_point(domain) -> None:
 
 
 def test_line_maxima_report_value_and_position(domain) -> None:
-    pts = profile_lines(domain)
+    pts = profile_lines(domain.X)
     cells = locate_cells(domain, pts.reshape(-1, 3)).reshape(3, -1)
     # Largest where the midpoint is closest to y = 0.7 (line 1) / z = -0.5 (line 2).
     m = domain.midpoints

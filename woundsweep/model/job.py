@@ -130,7 +130,7 @@ def run_stages(
     dofs = d.n_dofs
     cells = len(d.cells)
     cell_input_order = np.argsort(d.cell_input)
-    lines = profile_lines(d)
+    lines = profile_lines(d.X)
     line_cells = locate_cells(d, lines.reshape(-1, 3)).reshape(lines.shape[:2])
     records: list[StageRecord] = []
     failed = False
@@ -196,10 +196,8 @@ def write_output(
     mesh: Any,
     records: list[StageRecord],
     first_stage: int = 1,
-    points: np.ndarray | None = None,
 ) -> None:
-    """Write the job's solver file atomically (records before ``first_stage`` are left out);
-    ``points`` are the profile lines' coordinates (`profiles.profile_lines`)."""
+    """Write the job's solver file atomically (records before ``first_stage`` are left out)."""
     from .. import compat
     from ..solverfile import write_solver_file
 
@@ -214,14 +212,15 @@ def write_output(
         for r in keep
         if r.displacement_mm is not None and r.von_mises_kPa is not None
     }
+    lines = profile_lines(mesh.points).astype(np.float32)
     profiles = {
-        r.result.stage: {"profile_von_mises_kPa": r.profiles_kPa.astype(np.float32)}
+        r.result.stage: {
+            "profile_von_mises_kPa": r.profiles_kPa.astype(np.float32),
+            "profile_points_mm": lines,
+        }
         for r in keep
         if r.result.stage in fields and r.profiles_kPa is not None
     }
-    if profiles and points is not None:
-        for group in profiles.values():
-            group["profile_points_mm"] = np.asarray(points, dtype=np.float32)
     attrs = {**attrs, "dolfinx_version": compat.DOLFINX_VERSION}
     write_solver_file(path, attrs, mesh, rows, fields, profiles)
 
@@ -302,8 +301,6 @@ def solve_job(
         "geometry_id": str(row["geometry_id"]),
         "jit_time_s": float(model.jit_time_s),
     }
-    write_output(
-        path, attrs, mesh, records, first_stage=stages[0], points=profile_lines(model.domain)
-    )
+    write_output(path, attrs, mesh, records, first_stage=stages[0])
     code = ExitCode.OK if ok else ExitCode.NOT_CONVERGED
     return JobOutcome(reported, code, path, model.jit_time_s)

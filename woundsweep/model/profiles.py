@@ -33,16 +33,18 @@ PROFILE_POINTS = 100
 _AXIS = {"along_wound": 1, "through_thickness": 2, "across_patch": 0}
 
 
-def profile_lines(domain: Any) -> np.ndarray:
-    """(3, PROFILE_POINTS, 3) reference coordinates (mm) of the lines, in `PROFILE_LINES` order."""
-    lo, hi = domain.bbox
-    L = domain.half_length_y
-    x_edge, y_c, z_top = lo[0] + L, domain.y_c, domain.z_top
+def profile_lines(points: np.ndarray) -> np.ndarray:
+    """(3, PROFILE_POINTS, 3) reference coordinates (mm) of the lines in `PROFILE_LINES` order,
+    from the patch's bounding box (of the mesh ``points``)."""
+    lo, hi = np.min(points, axis=0), np.max(points, axis=0)
+    L, y_c, z_top = 0.5 * (hi[1] - lo[1]), 0.5 * (lo[1] + hi[1]), hi[2]
+    x_edge = lo[0] + L
     t = np.linspace(0.0, 1.0, PROFILE_POINTS)
+    one = np.ones_like(t)
     pts = np.empty((3, PROFILE_POINTS, 3))
-    pts[0] = np.c_[np.full_like(t, x_edge), y_c - L + 2 * L * t, np.full_like(t, z_top)]
-    pts[1] = np.c_[np.full_like(t, x_edge), np.full_like(t, y_c), lo[2] + (z_top - lo[2]) * t]
-    pts[2] = np.c_[lo[0] + (hi[0] - lo[0]) * t, np.full_like(t, y_c), np.full_like(t, z_top)]
+    pts[0] = np.c_[x_edge * one, y_c - L + 2 * L * t, z_top * one]
+    pts[1] = np.c_[x_edge * one, y_c * one, lo[2] + (z_top - lo[2]) * t]
+    pts[2] = np.c_[lo[0] + (hi[0] - lo[0]) * t, y_c * one, z_top * one]
     return pts
 
 

@@ -16,7 +16,7 @@ from woundsweep.errors import GeometryError
 from woundsweep.mesh.build import MeshData, build_mesh
 from woundsweep.mesh.sizing import PAPER_CELL_CAP, mesh_size_mm
 from woundsweep.mesh.spec import GeometrySpec
-from woundsweep.schema import CELL_TAGS, FACET_TAGS, TAGS
+from woundsweep.schema import CELL_TAGS, FACET_TAGS, TAGS, WOUND_TAGS
 
 # Coarse but varied: both shapes, wounds inside the dermis, touching the interface
 # (cylinder tangent to it, wedge apex on it) and cutting into the subcutis.
@@ -99,6 +99,7 @@ def test_tag_integers_are_the_documented_ones() -> None:
     assert dict(CELL_TAGS) == {"dermis": 1, "subcutis": 2}
     assert dict(FACET_TAGS) == {
         "x_min": 11, "x_max": 12, "y_min": 13, "y_max": 14, "bottom": 15, "top": 16, "wound": 17,
+        "wound_zone": 18,
     }  # fmt: skip
     assert TAGS["dermis"] == 1 and TAGS["wound"] == 17
 
@@ -117,7 +118,7 @@ def test_layer_volumes_match_analytic(meshes: dict[str, MeshData], name: str) ->
 @pytest.mark.parametrize("name", list(SPECS))
 def test_wound_surface_area_matches_analytic(meshes: dict[str, MeshData], name: str) -> None:
     spec, mesh = SPECS[name], meshes[name]
-    wound = mesh.facets[mesh.facet_tags == FACET_TAGS["wound"]]
+    wound = mesh.facets[np.isin(mesh.facet_tags, WOUND_TAGS)]
     assert tri_areas(mesh.points, wound).sum() == pytest.approx(wound_surface_area(spec), rel=1e-2)
 
 
@@ -139,8 +140,8 @@ def test_each_facet_tag_lies_on_its_surface(meshes: dict[str, MeshData], name: s
         tris = mesh.facets[mesh.facet_tags == FACET_TAGS[name_]]
         assert len(tris) > 0
         np.testing.assert_allclose(mesh.points[tris][..., axis], value, atol=1e-12 * (L + T))
-    # Wound facets: vertices on the cylinder / on a flank plane.
-    tris = mesh.facets[mesh.facet_tags == FACET_TAGS["wound"]]
+    # Wound facets (closure zone included): vertices on the cylinder / on a flank plane.
+    tris = mesh.facets[np.isin(mesh.facet_tags, WOUND_TAGS)]
     p = mesh.points[np.unique(tris)]
     if spec.shape == "cylindrical":
         a = spec.wound_aspect_factor

@@ -130,6 +130,16 @@ def test_stale_parameters_or_law_version_rebuild(tmp_path: Path, monkeypatch) ->
     assert got.status == "rebuilt" and "mesh law" in got.reason
 
 
+def test_other_closure_zone_rebuilds(tmp_path: Path) -> None:
+    # The zone is imprinted on the mesh, so a cached mesh of another zone is stale.
+    get_mesh(tmp_path, GID, SPEC)
+    wider = GeometrySpec(**SPEC.to_dict() | {"zone_y_fraction": 0.5})
+    got = get_mesh(tmp_path, GID, wider)
+    assert got.status == "rebuilt" and "other geometric parameters" in got.reason
+    assert got.mesh.info["closure_zone"]["y_fraction"] == 0.5
+    assert get_mesh(tmp_path, GID, wider).status == "cached"
+
+
 def test_cached_file_of_another_geometry_id_is_rejected(tmp_path: Path, reference) -> None:
     path = mesh_path(tmp_path, GID)
     save_mesh(path, reference, SPEC, "fedcba9876543210")

@@ -34,6 +34,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "woundsweep.commands.solve",
         "Solve one job through the stages in-process; writes its HDF5 result.",
     ),
+    "converge": (
+        "woundsweep.commands.converge",
+        "Solve one job on refined meshes: observed order, GCI, extrapolated values.",
+    ),
     "run": (
         "woundsweep.commands.run",
         "Run a shard of the jobs, each in its own process, into RUN_DIR's store.",

@@ -26,6 +26,8 @@ __all__ = [
     "TOP",
     "UNITS",
     "WOUND",
+    "WOUND_TAGS",
+    "WOUND_ZONE",
     "X_MAX",
     "X_MIN",
     "Y_MAX",
@@ -43,6 +45,9 @@ UNITS = "mm, kPa, mN, s"
 # Cell and facet tags of the mesh contract (integers are part of it).
 DERMIS, SUBCUTIS = 1, 2
 X_MIN, X_MAX, Y_MIN, Y_MAX, BOTTOM, TOP, WOUND = 11, 12, 13, 14, 15, 16, 17
+# The wound surface is WOUND (outside the closure zone) plus WOUND_ZONE (the closure zone).
+WOUND_ZONE = 18
+WOUND_TAGS = (WOUND, WOUND_ZONE)
 CELL_TAGS = MappingProxyType({"dermis": DERMIS, "subcutis": SUBCUTIS})
 FACET_TAGS = MappingProxyType(
     {
@@ -53,6 +58,7 @@ FACET_TAGS = MappingProxyType(
         "bottom": BOTTOM,
         "top": TOP,
         "wound": WOUND,
+        "wound_zone": WOUND_ZONE,
     }
 )
 TAGS = MappingProxyType({**CELL_TAGS, **FACET_TAGS})
@@ -130,6 +136,8 @@ class StageResult(NamedTuple):
     n_penetrating: int | None = None  # contact stages (4-6) only
     max_penetration_mm: float | None = None  # contact stages only
     contact_force_mN: float | None = None  # contact stages only
+    # Stage 3 only: 1 if the flanks pass through each other (closure gap < 0), else 0.
+    interpenetrating: int | None = None
     residual_norm: float | None = None
     dofs: int | None = None
     cells: int | None = None

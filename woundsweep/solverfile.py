@@ -3,8 +3,9 @@
 Layout (docs/design.md, "Solver output"): root attributes (`ROOT_ATTRS`; ``stage_results`` is
 a JSON list with one dict per reported stage: the `StageResult` fields plus diagnostic keys),
 the group ``mesh`` with `MESH_DATASETS` in the input numbering, and for every converged stage
-a group ``stage_<k>`` with `STAGE_DATASETS` (float32 per point, per cell). An unconverged
-state is never written as a field.
+a group ``stage_<k>`` with `STAGE_DATASETS` (float32 per point, per cell) and, when the
+solver sampled them, `PROFILE_DATASETS` (von Mises on the lines of `model.profiles`). An
+unconverged state is never written as a field.
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ from .schema import UNITS, StageStatus
 __all__ = [
     "MESH_DATASETS",
     "MESH_GROUP",
+    "PROFILE_DATASETS",
     "ROOT_ATTRS",
     "STAGE_DATASETS",
     "SolverOutput",
@@ -47,6 +49,8 @@ ROOT_ATTRS = (
 MESH_GROUP = "mesh"
 MESH_DATASETS: Mapping[str, Any] = {"points": np.float64, "cells": np.int64, "cell_tags": np.int32}
 STAGE_DATASETS = ("displacement_mm", "von_mises_kPa")
+# Optional per stage: (3, 100) von Mises on the profile lines and their (3, 100, 3) points.
+PROFILE_DATASETS = ("profile_von_mises_kPa", "profile_points_mm")
 _STAGE_GROUP = re.compile(r"stage_(\d+)")
 
 
@@ -75,13 +79,15 @@ def write_solver_file(
     mesh: Any,
     rows: Sequence[Mapping[str, Any]],
     fields: Mapping[int, tuple[np.ndarray, np.ndarray]],
+    extra: Mapping[int, Mapping[str, np.ndarray]] | None = None,
 ) -> None:
     """Write a solver file atomically.
 
     ``attrs`` holds the job's root attributes (``woundsweep_version`` and ``units`` are
     added), ``mesh`` has ``points``, ``cells`` and ``cell_tags``, ``rows`` are the reported
     stages' result dicts, and ``fields`` maps a converged stage to its (displacement,
-    von Mises) arrays in `STAGE_DATASETS` order.
+    von Mises) arrays in `STAGE_DATASETS` order; ``extra`` adds datasets to a converged
+    stage's group (e.g. `PROFILE_DATASETS`).
     """
     import h5py
 
@@ -99,6 +105,8 @@ def write_solver_file(
                 s = f.create_group(stage_group(stage))
                 for name, data in zip(STAGE_DATASETS, arrays):
                     s.create_dataset(name, data=data, compression="gzip")
+                for name, data in (extra or {}).get(stage, {}).items():
+                    s.create_dataset(name, data=data)
 
     atomic_write(path, _write)
 

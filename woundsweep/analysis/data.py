@@ -82,17 +82,24 @@ def drop_orphans(results: pd.DataFrame, run_dir: Path) -> tuple[pd.DataFrame, in
     return results[in_manifest], int((~in_manifest).sum())
 
 
-def select_rows(df: pd.DataFrame) -> tuple[pd.DataFrame, dict[str, Any]]:
-    """Converged rows with a finite, positive maximal stress; and the row counts."""
+def select_rows(
+    df: pd.DataFrame, drop_interpenetrating: bool = False
+) -> tuple[pd.DataFrame, dict[str, Any]]:
+    """Converged rows with a finite, positive maximal stress (without the stage-3 rows whose
+    flanks interpenetrate if ``drop_interpenetrating``); and the row counts."""
     converged = df["status"].astype(str) == StageStatus.CONVERGED.value
     stress = pd.to_numeric(df[STRESS], errors="coerce")
     positive = converged & np.isfinite(stress) & (stress > 0)
-    rows = df[positive].reset_index(drop=True)
+    flag = df["interpenetrating"] if "interpenetrating" in df else pd.Series(0, index=df.index)
+    overlap = positive & (pd.to_numeric(flag, errors="coerce") == 1)
+    rows = df[positive & ~(overlap & drop_interpenetrating)].reset_index(drop=True)
     counts = {
         "store_rows": int(len(df)),
         "jobs": int(df["job_id"].nunique()),
         "converged_rows": int(converged.sum()),
         "used_rows": int(len(rows)),
+        "interpenetrating_rows": int(overlap.sum()),
+        "interpenetrating_dropped": bool(drop_interpenetrating),
         "status": {
             str(k): int(v) for k, v in df["status"].astype(str).value_counts().sort_index().items()
         },

@@ -80,6 +80,10 @@ def summary_lines(metrics: dict[str, Any]) -> list[str]:
     "--param", "params", multiple=True, metavar="KEY=VALUE",
     help="Override an analysis setting, e.g. max_depth=4 or n_estimators=300 (repeatable).",
 )  # fmt: skip
+@click.option(
+    "--drop-interpenetrating", is_flag=True,
+    help="Leave out the stage-3 rows whose flanks interpenetrate (closure gap < 0).",
+)  # fmt: skip
 def cmd(
     run_dir: Path,
     quantiles: int | None,
@@ -87,6 +91,7 @@ def cmd(
     split: str,
     nthread: int | None,
     params: tuple[str, ...],
+    drop_interpenetrating: bool,
 ) -> None:
     """Fit the stress-quantile model (XGBoost) and write RUN_DIR/analysis/.
 
@@ -102,7 +107,9 @@ def cmd(
         if value is not None:
             overrides[key] = value
     schemes = SCHEMES if split == "both" else (split,)
-    result = run_analysis(run_dir, overrides, schemes, echo=click.echo)
+    result = run_analysis(
+        run_dir, overrides, schemes, echo=click.echo, drop_interpenetrating=drop_interpenetrating
+    )
     for line in summary_lines(result.metrics):
         click.echo(line)
     click.echo(f"wrote {len(result.files)} files to {result.out_dir} (see report.md)")

@@ -16,6 +16,7 @@ from ..fsutil import atomic_write, check_output_file
 from ..mesh.build import MeshData
 from ..mesh.cache import CachedMesh, get_mesh
 from ..mesh.spec import GeometrySpec
+from ..model.parameters import ClosureZone
 from ..sweep.grid import load_run
 
 __all__ = ["cmd", "mesh_geometry", "write_vtu"]
@@ -67,9 +68,10 @@ def write_vtu(path: str | Path, mesh: MeshData) -> None:
     atomic_write(path, _write)
 
 
-def mesh_geometry(run_dir: Path, row: pd.Series) -> CachedMesh:
-    """Build or reuse the mesh of the geometry of manifest ``row`` (errors name its job)."""
-    spec = GeometrySpec.from_row(row)  # GeometryError names the job
+def mesh_geometry(run_dir: Path, row: pd.Series, zone: ClosureZone | None = None) -> CachedMesh:
+    """Build or reuse the mesh of the geometry of manifest ``row`` with the sweep's closure
+    ``zone`` (errors name its job)."""
+    spec = GeometrySpec.from_row(row, zone)  # GeometryError names the job
     try:
         return get_mesh(run_dir, str(row["geometry_id"]), spec)
     except GeometryError as err:
@@ -121,8 +123,9 @@ def cmd(
             raise click.BadParameter(str(err), param_hint="--out") from None
     run = load_run(run_dir)
     man = run.manifest
+    zone = ClosureZone.from_sweep(run.sweep.stages)
     if all_:
-        _mesh_all(run.run_dir, man)
+        _mesh_all(run.run_dir, man, zone)
         return
     if job is not None:
         hit = man[man["job_index"] == job]
@@ -137,7 +140,7 @@ def cmd(
             f"no geometry {geometry_id!r} in {run_dir}", param_hint="--geometry"
         )
     row = hit.iloc[0] if job is not None else rows.iloc[0]
-    got = mesh_geometry(run.run_dir, row)
+    got = mesh_geometry(run.run_dir, row, zone)
     if got.status == "rebuilt":
         click.echo(f"cached mesh rejected ({got.reason}); rebuilt", err=True)
     click.echo(_line(str(geometry_id), rows, got))
@@ -146,12 +149,12 @@ def cmd(
         click.echo(f"wrote {out}")
 
 
-def _mesh_all(run_dir: Path, man: pd.DataFrame) -> None:
+def _mesh_all(run_dir: Path, man: pd.DataFrame, zone: ClosureZone) -> None:
     groups = list(man.groupby("geometry_id", sort=False))
     cells, quality, status, failures = [], [], {"built": 0, "rebuilt": 0, "cached": 0}, []
     for gid, rows in tqdm(groups, desc="meshing", unit="geometry", leave=False):
         try:
-            got = mesh_geometry(run_dir, rows.iloc[0])
+            got = mesh_geometry(run_dir, rows.iloc[0], zone)
         except GeometryError as err:
             failures.append(f"geometry {gid}: {err}")
             continue

@@ -1,7 +1,8 @@
 """Tetrahedral mesh of a `GeometrySpec` with gmsh + numpy (no DOLFINx): ``build_mesh -> MeshData``.
 
 gmsh meshes one quarter (x <= w/2, y >= 0; the layer interface is conforming through an OCC
-fragment) under the size law of `woundsweep.mesh.sizing`, and the quarter is mirrored about
+fragment, and the closure zone's border lines are imprinted on the wound face, so the zone is a
+union of whole facets, tagged WOUND_ZONE) under the size law of `woundsweep.mesh.sizing`, and the quarter is mirrored about
 x = w/2 and y = 0 in numpy. The mesh is therefore exactly mirror-symmetric, which the closure
 boundary condition at x = w/2 relies on, and it costs a quarter of a full build. Cell and
 facet tags are those of `woundsweep.schema`.
@@ -9,6 +10,7 @@ facet tags are those of `woundsweep.schema`.
 
 from __future__ import annotations
 
+import math
 import threading
 import time
 from collections.abc import Iterator, Mapping
@@ -19,7 +21,18 @@ import gmsh
 import numpy as np
 
 from ..errors import GeometryError
-from ..schema import BOTTOM, DERMIS, SUBCUTIS, TOP, WOUND, X_MAX, X_MIN, Y_MAX, Y_MIN
+from ..schema import (
+    BOTTOM,
+    DERMIS,
+    SUBCUTIS,
+    TOP,
+    WOUND,
+    WOUND_ZONE,
+    X_MAX,
+    X_MIN,
+    Y_MAX,
+    Y_MIN,
+)
 from .sizing import MESH_LAW_VERSION, SIZE_LAW, _size_scale, _wound_size, mesh_size_mm
 from .spec import GeometrySpec
 
@@ -112,8 +125,52 @@ def _quarter_geometry(spec: GeometrySpec) -> None:
     cut, _ = occ.cut([(3, dermis), (3, subcutis)], tool)
     if len(cut) != 2:
         raise GeometryError(f"the wound cut gave {len(cut)} volumes instead of 2")
-    occ.fragment(cut[:1], cut[1:])
+    # One fragment makes the layer interface conforming and imprints the zone's border.
+    occ.fragment(cut[:1], cut[1:] + _zone_border(spec))
     occ.synchronize()
+
+
+def zone_limits(spec: GeometrySpec) -> tuple[float, float]:
+    """The closure zone's bounds: |y| <= y_max (mm) and z >= z_min (mm)."""
+    return (
+        spec.zone_y_fraction * spec.patch_half_length_mm,
+        -spec.zone_depth_fraction * spec.wound_depth_mm,
+    )
+
+
+def _flank_x(spec: GeometrySpec, z: float) -> float:
+    """x of the quarter's (left) flank at depth z."""
+    xc = spec.wound_width_mm / 2
+    if spec.shape == "cylindrical":
+        R, zc = spec.wound_radius_mm, spec.wound_axis_z_mm
+        return xc - math.sqrt(max(R * R - (z - zc) ** 2, 0.0))
+    return xc * (-z / spec.wound_depth_mm)  # from (0, 0) down to the apex (xc, -d)
+
+
+def _zone_border(spec: GeometrySpec) -> list[tuple[int, int]]:
+    """Curves of the zone's border on the quarter's wound face: the section at y = y_max from
+    the surface down to z_min, and the line z = z_min from y = 0 to y_max (each omitted where
+    it falls on an edge the face already has: the y = L face, the apex, the layer interface)."""
+    occ = gmsh.model.occ
+    L, T, t_d = spec.patch_half_length_mm, spec.total_thickness_mm, spec.dermal_thickness_mm
+    y_max, z_min = zone_limits(spec)
+    x_min = _flank_x(spec, z_min)
+    tol = 1e-9 * max(L, T)
+    curves = []
+    if y_max < L - tol:
+        # The section y = y_max, split where it crosses the layer interface.
+        levels = [0.0] + ([-t_d] if z_min < -t_d - tol else []) + [z_min]
+        pts = [occ.addPoint(_flank_x(spec, z), y_max, z) for z in levels]
+        if spec.shape == "cylindrical":
+            axis = occ.addPoint(spec.wound_width_mm / 2, y_max, spec.wound_axis_z_mm)
+            curves += [occ.addCircleArc(a, axis, b) for a, b in zip(pts, pts[1:])]
+        else:
+            curves += [occ.addLine(a, b) for a, b in zip(pts, pts[1:])]
+    if spec.zone_depth_fraction < 1 and abs(z_min + t_d) > tol:
+        a = occ.addPoint(x_min, 0.0, z_min)
+        b = occ.addPoint(x_min, y_max, z_min)
+        curves.append(occ.addLine(a, b))
+    return [(1, c) for c in curves]
 
 
 def _classify(spec: GeometrySpec) -> tuple[dict[int, int], dict[int, int], dict[int, tuple]]:
@@ -199,8 +256,30 @@ def _extract(
         coords[index[on], axis] = value
     cells, cell_tags, element_tags = _elements(3, vols, index, _TETRAHEDRA)
     facets, facet_tags, _ = _elements(2, surfaces, index, _TRIANGLES)
+    facet_tags = _tag_zone(spec, coords, facets, facet_tags)
     quality = gmsh.model.mesh.getElementQualities(element_tags, "minSICN")
     return coords, cells, cell_tags, facets, facet_tags, float(np.min(quality))
+
+
+def _tag_zone(
+    spec: GeometrySpec, coords: np.ndarray, facets: np.ndarray, facet_tags: np.ndarray
+) -> np.ndarray:
+    """Retag the quarter's wound facets inside the closure zone WOUND_ZONE.
+
+    The zone's border is imprinted, so no facet straddles it: a facet with a vertex beyond
+    the border by more than rounding and another inside is a GeometryError."""
+    y_max, z_min = zone_limits(spec)
+    tol = 1e-9 * max(spec.patch_half_length_mm, spec.total_thickness_mm)
+    p = coords[facets]
+    inside = (p[..., 1] <= y_max + tol) & (p[..., 2] >= z_min - tol)
+    outside = (p[..., 1] >= y_max - tol) | (p[..., 2] <= z_min + tol)
+    wound = facet_tags == WOUND
+    zone = wound & inside.all(axis=1)
+    if (wound & ~zone & ~outside.all(axis=1)).any():
+        raise GeometryError("a wound facet straddles the closure zone's border")
+    tags = facet_tags.copy()
+    tags[zone] = WOUND_ZONE
+    return tags
 
 
 def _mirror(
@@ -297,6 +376,10 @@ def build_mesh(spec: GeometrySpec) -> MeshData:
         "wound_size_mm": s * _wound_size(spec),
         "dermis_size_mm": s * SIZE_LAW["layer_per_dermis"] * spec.dermal_thickness_mm,
         "size_law": dict(SIZE_LAW),
+        "closure_zone": {
+            "y_fraction": spec.zone_y_fraction,
+            "depth_fraction": spec.zone_depth_fraction,
+        },
         "gmsh_version": gmsh.__version__,
     }
     return MeshData(

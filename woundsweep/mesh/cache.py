@@ -3,8 +3,8 @@
 The nine jobs of a geometry (skin types x orientations) share one mesh. A cached file is used
 only when it validates completely: it opens, holds the five arrays with the right dtypes and
 consistent shapes, node indices and tags are in range, the SHA-256 of the arrays matches the
-one stored beside them, and it was built from the same `GeometrySpec` with the current
-`MESH_LAW_VERSION`. Anything else (truncated, corrupt, stale) is rebuilt and replaced; the
+one stored beside them, and it was built from the same `GeometrySpec` (closure zone included)
+with the current `MESH_LAW_VERSION`. Anything else (truncated, corrupt, stale) is rebuilt and replaced; the
 temporary file + ``os.replace`` write means readers never see a partial file.
 """
 

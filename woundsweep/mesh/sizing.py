@@ -12,10 +12,10 @@ tolerances) only on the dimensionless factors; every term scales with s, so a la
 gives a uniformly finer field. Fine at the wound (h_w resolves both the dermis and the wound
 width), graded away from it, finer in the dermis than in the subcutis, coarser with depth,
 and never coarser than s L / 4 (eight cells along the wound length at m = 0.5). On the 1,296
-paper geometries (benchmarks/bench_geometry.py --all): min / median / max cells
-2.6k / 4.5k / 8.4k at m = 0.3, 4.6k / 7.4k / 15.1k at m = 0.5, 6.8k / 11.6k / 24.6k at
-m = 0.7; the count rises strictly with m for every geometry. Minimum SICN is 0.053 over the
-grid; the few meshes below 0.1 are cylinders whose bottom is tangent to (or within 2% of) the
+paper geometries with the default closure zone (benchmarks/bench_geometry.py --all): min /
+median / max cells 2.7k / 4.5k / 8.7k at m = 0.3, 4.6k / 7.6k / 15.4k at m = 0.5,
+7.2k / 11.6k / 24.8k at m = 0.7; the count rises strictly with m for every geometry. Minimum
+SICN is 0.050 over the grid; the few meshes below 0.1 are cylinders whose bottom is tangent to (or within 2% of) the
 layer interface, where the dermis between wound and subcutis thins to a cusp.
 """
 
@@ -28,9 +28,9 @@ from .spec import GeometrySpec, wound_distance_mm
 
 __all__ = ["MESH_LAW_VERSION", "PAPER_CELL_CAP", "SIZE_LAW", "mesh_size_mm"]
 
-# Bumped whenever the geometry or the size law changes: cached meshes of another version
-# are rebuilt.
-MESH_LAW_VERSION = 1
+# Bumped whenever the geometry or the size law changes (2: the closure zone is imprinted on
+# the wound surface): cached meshes of another version are rebuilt.
+MESH_LAW_VERSION = 2
 # The paper omitted models above 40,000 cells; the size law keeps every paper geometry below.
 PAPER_CELL_CAP = 40_000
 

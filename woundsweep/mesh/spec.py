@@ -8,6 +8,10 @@ x = w/2:
 - cylindrical: a cylinder along y with its axis at (x = w/2, z = a w) and radius
   R = sqrt((w/2)^2 + (a w)^2), so the opening at the surface is w and the depth is R - a w;
 - wedge: an isosceles triangular prism, width w at the surface, apex at z = -d.
+
+The closure zone (where primary intention acts, the sweep's ``stages.closure_zone``) is part
+of the geometry: the wound surface within |y| <= zone_y_fraction * L and
+z >= -zone_depth_fraction * d is meshed as its own faces (`woundsweep.mesh.build`).
 """
 
 from __future__ import annotations
@@ -18,6 +22,7 @@ from dataclasses import asdict, dataclass
 from typing import Any
 
 from ..errors import GeometryError
+from ..model.parameters import ClosureZone
 
 __all__ = ["SHAPES", "GeometrySpec", "wound_distance_mm"]
 
@@ -30,6 +35,8 @@ class GeometrySpec:
 
     ``wound_aspect_factor`` is the cylinder's a (None for a wedge); for a cylinder
     ``wound_depth_mm`` must equal R - a w. ``mesh_size_factor`` in (0, 1]: larger is finer.
+    ``zone_y_fraction`` and ``zone_depth_fraction`` in (0, 1] bound the closure zone
+    (|y| <= zone_y_fraction * L, z >= -zone_depth_fraction * d).
     """
 
     shape: str
@@ -40,6 +47,8 @@ class GeometrySpec:
     wound_depth_mm: float
     wound_aspect_factor: float | None
     mesh_size_factor: float
+    zone_y_fraction: float = ClosureZone.y_fraction
+    zone_depth_fraction: float = ClosureZone.depth_fraction
 
     def __post_init__(self) -> None:
         _validate(self)
@@ -91,10 +100,12 @@ class GeometrySpec:
         )
 
     @classmethod
-    def from_row(cls, row: Mapping[str, Any] | Any) -> GeometrySpec:
+    def from_row(cls, row: Mapping[str, Any] | Any, zone: Any = None) -> GeometrySpec:
         """Build from a manifest row (pandas Series or dict with the manifest columns).
 
-        Errors name the job (``job_index``) when the row has one.
+        ``zone`` (an object with ``y_fraction`` and ``depth_fraction``, e.g. the sweep's
+        `ClosureZone`) sets the closure zone; None keeps the defaults. Errors name the job
+        (``job_index``) when the row has one.
         """
         get = row.get
         shape = get("wound_shape", get("shape"))
@@ -112,6 +123,7 @@ class GeometrySpec:
                 _num(get("wound_depth_mm")),
                 aspect,
                 _num(get("mesh_size_factor")),
+                *(() if zone is None else (float(zone.y_fraction), float(zone.depth_fraction))),
             )
         except (GeometryError, TypeError, ValueError) as err:
             job = get("job_index")
@@ -144,10 +156,13 @@ class GeometrySpec:
         """One-line summary for messages."""
         a = self.wound_aspect_factor
         aspect = f" a={a:g}" if a is not None else ""
+        zone = (self.zone_y_fraction, self.zone_depth_fraction)
+        default = (ClosureZone.y_fraction, ClosureZone.depth_fraction)
+        zone_text = "" if zone == default else f" zone={zone[0]:.4g},{zone[1]:.4g}"
         return (
             f"{self.shape} t_d={self.dermal_thickness_mm:g} t_s={self.subcutis_thickness_mm:g} "
             f"L={self.patch_half_length_mm:g} w={self.wound_width_mm:g} "
-            f"d={self.wound_depth_mm:.4g}{aspect} m={self.mesh_size_factor:g}"
+            f"d={self.wound_depth_mm:.4g}{aspect} m={self.mesh_size_factor:g}{zone_text}"
         )
 
 
@@ -174,6 +189,10 @@ def _validate(spec: GeometrySpec) -> None:
     m = spec.mesh_size_factor
     if not isinstance(m, (int, float)) or not math.isfinite(m) or not 0 < m <= 1:
         raise GeometryError(f"mesh_size_factor={m!r} must be in (0, 1] (larger is finer)")
+    for name in ("zone_y_fraction", "zone_depth_fraction"):
+        v = getattr(spec, name)
+        if not isinstance(v, (int, float)) or not math.isfinite(v) or not 0 < v <= 1:
+            raise GeometryError(f"{name}={v!r} must be a fraction in (0, 1]")
     w, L, T = spec.wound_width_mm, spec.patch_half_length_mm, spec.total_thickness_mm
     if w > 2 * L:
         raise GeometryError(

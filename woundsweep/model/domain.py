@@ -1,21 +1,23 @@
 """The discretised wound patch: the DOLFINx mesh, its P1 space and the sets the stages act on.
 
 `WoundDomain` holds the node and facet sets of the boundary conditions (x and y faces, deep
-face), the wound's mirror plane and depth, the closure zone on both flanks, the two point
-constraints that remove rigid in-plane motion, the facet tags of the solver's integrals, and
-the cellwise kinematics of P1 fields (gradient, det F). Node indices are DOLFINx dof-node
+face), the wound's mirror plane and depth, the closure zone on both flanks (the mesh's
+WOUND_ZONE facets and their nodes), the two point constraints that remove rigid in-plane
+motion, the facet tags of the solver's integrals, and the cellwise kinematics of P1 fields
+(gradient, det F). Node indices are DOLFINx dof-node
 indices (dof ``3 i + c`` is component c of node i); ``input_node`` maps input points to them.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Any
 
 import numpy as np
 
 from .. import compat
 from ..contact.geometry import owning_cells
-from ..schema import BOTTOM, DERMIS, SUBCUTIS, WOUND, X_MAX, X_MIN, Y_MAX, Y_MIN
+from ..schema import BOTTOM, DERMIS, SUBCUTIS, WOUND_TAGS, WOUND_ZONE, X_MAX, X_MIN, Y_MAX, Y_MIN
 from .parameters import ClosureZone
 
 __all__ = [
@@ -45,12 +47,17 @@ class WoundDomain:
     """Mesh, space, index maps, boundary sets and closure zone of one wound patch.
 
     ``mesh_data`` has the `MeshData` fields ``points``, ``cells``, ``cell_tags``, ``facets``,
-    ``facet_tags`` (docs/design.md). Raises ValueError for a mesh that does not fit the
-    contract (unused points, no deep face or x faces).
+    ``facet_tags`` (docs/design.md). The closure zone is the mesh's WOUND_ZONE facets;
+    ``zone``, when given, must be the one the mesh was built with (``info["closure_zone"]``,
+    if recorded). Raises ValueError for a mesh that does not fit the contract (unused points,
+    no deep face or x faces, another closure zone).
     """
 
     def __init__(self, mesh_data: Any, zone: ClosureZone | None = None) -> None:
-        self.zone_spec = zone or ClosureZone()
+        built = (getattr(mesh_data, "info", None) or {}).get("closure_zone")
+        if zone is not None and built is not None and built != dataclasses.asdict(zone):
+            raise ValueError(f"the mesh's closure zone {built} is not the sweep's {zone}")
+        self.zone_spec = zone or (ClosureZone(**built) if built else ClosureZone())
         pts = np.asarray(mesh_data.points, dtype=float)
         cells = np.asarray(mesh_data.cells, dtype=np.int64)
         ctags = np.asarray(mesh_data.cell_tags, dtype=np.int32)
@@ -79,8 +86,8 @@ class WoundDomain:
         return 3 * len(self.X)
 
     def wound_facets(self) -> np.ndarray:
-        """The wound surface's facets (k, 3) in node indices."""
-        return self.input_node[self.facets[self.facet_tags == WOUND]]
+        """The wound surface's facets (k, 3) in node indices, the closure zone included."""
+        return self.input_node[self.facets[np.isin(self.facet_tags, WOUND_TAGS)]]
 
     # -- kinematics -------------------------------------------------------------------------
 
@@ -154,30 +161,22 @@ class WoundDomain:
 
     def _closure_zone(self, facets: np.ndarray, ftags: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Set the wound's mirror plane, depth and zone nodes; return the zone's facet indices
-        on the left and right flank."""
-        wound_mask = ftags == WOUND
+        (the WOUND_ZONE facets) on the left and right flank."""
+        wound_mask = np.isin(ftags, WOUND_TAGS)
         self.has_wound = bool(wound_mask.any())
         empty = np.zeros(0, dtype=np.int64)
         self.zone_nodes = empty
         self.wound_depth = 0.0
         if not self.has_wound:
             return empty, empty
-        tol = 1e-9 * self.ell
         p = self.points
         wound_pts = np.unique(facets[wound_mask])
         wx = p[wound_pts, 0]
         # The wound's mirror plane; the patch centre for the symmetric paper geometries.
         self.x_c = 0.5 * (wx.min() + wx.max())
         self.wound_depth = float(self.z_top - p[wound_pts, 2].min())
-        y_lim = self.zone_spec.y_fraction * self.half_length_y + tol
-        z_lim = self.z_top - self.zone_spec.depth_fraction * self.wound_depth - tol
-        in_zone = np.zeros(len(p), dtype=bool)
-        in_zone[wound_pts] = (np.abs(p[wound_pts, 1] - self.y_c) <= y_lim) & (
-            p[wound_pts, 2] >= z_lim
-        )
-        self.zone_nodes = np.unique(self.input_node[np.flatnonzero(in_zone)])
-        wf = np.flatnonzero(wound_mask)
-        zf = wf[np.all(in_zone[facets[wf]], axis=1)]
+        zf = np.flatnonzero(ftags == WOUND_ZONE)
+        self.zone_nodes = np.unique(self.input_node[np.unique(facets[zf])])
         left = p[facets[zf]].mean(axis=1)[:, 0] < self.x_c
         return zf[left], zf[~left]
 

@@ -28,11 +28,15 @@ import numpy as np
 from ..errors import GeometryError, SolverError, WoundsweepError
 from ..schema import ExitCode, StageResult, StageStatus
 from ..solver.settings import NewtonSettings
+from .profiles import line_maxima, locate_cells, profile_lines, sample_profiles
 
 __all__ = [
     "JobOutcome",
     "NotConvergedError",
     "StageRecord",
+    "job_model",
+    "job_row",
+    "job_spec",
     "run_stages",
     "solve_job",
     "stress_summary",
@@ -53,6 +57,8 @@ class StageRecord(NamedTuple):
     extra: dict[str, float | int | None]
     displacement_mm: np.ndarray | None
     von_mises_kPa: np.ndarray | None
+    # Von Mises on the `profiles` lines, (3, PROFILE_POINTS), if converged.
+    profiles_kPa: np.ndarray | None = None
 
 
 class JobOutcome(NamedTuple):
@@ -102,6 +108,14 @@ def _finite(x: float | int | None) -> float | int | None:
     return x if isinstance(x, int) else float(x)
 
 
+def _interpenetrating(stage: int, gap: float | None) -> int | None:
+    """The stage-3 flag: 1 if the closure gap is negative (the flanks overlap), else 0; None
+    for the other stages and for a gap that is not a number."""
+    if stage != 3 or gap is None or not math.isfinite(gap):
+        return None
+    return int(gap < 0)
+
+
 def run_stages(
     model: Any,
     materials: Any,
@@ -116,6 +130,8 @@ def run_stages(
     dofs = d.n_dofs
     cells = len(d.cells)
     cell_input_order = np.argsort(d.cell_input)
+    lines = profile_lines(d.X)
+    line_cells = locate_cells(d, lines.reshape(-1, 3)).reshape(lines.shape[:2])
     records: list[StageRecord] = []
     failed = False
     for k in range(1, last_stage + 1):
@@ -141,6 +157,7 @@ def run_stages(
             newton_iterations=int(s.iterations),
             time_s=float(out.time_s),
             closure_gap_mm=_finite(gap) if gap is not None else None,
+            interpenetrating=_interpenetrating(k, gap),
             min_J=_finite(d.min_det(model.u)),
             residual_norm=_finite(s.residual_norm),
             dofs=dofs,
@@ -156,11 +173,15 @@ def run_stages(
             "factor_time_s": float(s.factor_time_s),
         }
         extra.update({key: v for key, v in out.diagnostics.items() if key not in result._fields})
+        profiles = sample_profiles(line_cells, vm) if ok else None
+        if profiles is not None:
+            extra.update(line_maxima(lines, profiles))
         rec = StageRecord(
             result,
             {key: _finite(v) for key, v in extra.items()},
             model.displacement_input().astype(np.float32) if ok else None,
             vm[cell_input_order].astype(np.float32) if ok else None,
+            profiles,
         )
         records.append(rec)
         if echo is not None:
@@ -191,38 +212,44 @@ def write_output(
         for r in keep
         if r.displacement_mm is not None and r.von_mises_kPa is not None
     }
+    lines = profile_lines(mesh.points).astype(np.float32)
+    profiles = {
+        r.result.stage: {
+            "profile_von_mises_kPa": r.profiles_kPa.astype(np.float32),
+            "profile_points_mm": lines,
+        }
+        for r in keep
+        if r.result.stage in fields and r.profiles_kPa is not None
+    }
     attrs = {**attrs, "dolfinx_version": compat.DOLFINX_VERSION}
-    write_solver_file(path, attrs, mesh, rows, fields)
+    write_solver_file(path, attrs, mesh, rows, fields, profiles)
 
 
-def solve_job(
-    run_dir: str | Path,
-    job_index: int,
-    stages: tuple[int, int] = (1, 6),
-    out: str | Path | None = None,
-    echo: Callable[[StageRecord], None] | None = None,
-    jit: dict[str, Any] | None = None,
-) -> JobOutcome:
-    """Solve manifest job ``job_index`` of a run directory through ``stages`` (A, B).
-
-    Stages 1..B run (a later stage starts from the earlier ones); results of A..B are
-    reported and written to ``out`` (default ``RUN_DIR/solve/job_<N>.h5``).
-    """
-    from ..mesh.cache import get_mesh
-    from ..mesh.spec import GeometrySpec
-    from ..sweep.grid import load_run
-    from .materials import JobMaterials
-    from .parameters import ClosureZone
-    from .stages import WoundModel
-
-    run = load_run(run_dir)
+def job_row(run: Any, job_index: int) -> Any:
+    """The manifest row of ``job_index`` in a `Run` (SolverError if it has none)."""
     manifest = run.manifest
     hit = manifest.index[manifest["job_index"] == int(job_index)]
     if len(hit) != 1:
         raise SolverError(f"job {job_index}: not in the manifest (0..{len(manifest) - 1})")
-    row = manifest.loc[hit[0]]
-    spec = GeometrySpec.from_row(row)
-    mesh = get_mesh(run.run_dir, str(row["geometry_id"]), spec).mesh
+    return manifest.loc[hit[0]]
+
+
+def job_spec(run: Any, row: Any) -> Any:
+    """The `GeometrySpec` of a manifest row with the sweep's closure zone (part of the mesh)."""
+    from ..mesh.spec import GeometrySpec
+    from .parameters import ClosureZone
+
+    return GeometrySpec.from_row(row, ClosureZone.from_sweep(run.sweep.stages))
+
+
+def job_model(run: Any, row: Any, mesh: Any, jit: dict[str, Any] | None = None) -> tuple[Any, Any]:
+    """The `WoundModel` of a manifest row on ``mesh`` with the run's settings, and the job's
+    materials (GeometryError for a mesh that does not fit the contract)."""
+    from .materials import JobMaterials
+    from .parameters import ClosureZone
+    from .stages import WoundModel
+
+    job_index = int(row["job_index"])
     skin, angle = str(row["skin_type"]), float(row["orientation_deg"])
     if skin not in run.sweep.materials["skin_types"]:
         raise SolverError(f"job {job_index}: unknown skin type {skin!r}")
@@ -240,6 +267,30 @@ def solve_job(
         )
     except ValueError as err:  # the mesh's tags or numbering do not fit the contract
         raise GeometryError(f"job {job_index}: unusable mesh: {err}") from None
+    return model, materials
+
+
+def solve_job(
+    run_dir: str | Path,
+    job_index: int,
+    stages: tuple[int, int] = (1, 6),
+    out: str | Path | None = None,
+    echo: Callable[[StageRecord], None] | None = None,
+    jit: dict[str, Any] | None = None,
+) -> JobOutcome:
+    """Solve manifest job ``job_index`` of a run directory through ``stages`` (A, B).
+
+    Stages 1..B run (a later stage starts from the earlier ones); results of A..B are
+    reported and written to ``out`` (default ``RUN_DIR/solve/job_<N>.h5``).
+    """
+    from ..mesh.cache import get_mesh
+    from ..sweep.grid import load_run
+
+    run = load_run(run_dir)
+    row = job_row(run, job_index)
+    spec = job_spec(run, row)
+    mesh = get_mesh(run.run_dir, str(row["geometry_id"]), spec).mesh
+    model, materials = job_model(run, row, mesh, jit)
     records = run_stages(model, materials, stages[1], echo=echo)
     reported = [r for r in records if r.result.stage >= stages[0]]
     ok = all(r.result.status == StageStatus.CONVERGED for r in records)

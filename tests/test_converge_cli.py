@@ -1,0 +1,95 @@
+"""`woundsweep converge` and the solve outputs of the zone issue on a tiny job (DOLFINx)."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from woundsweep.model.gci import grid_study
+
+SWEEP = {
+    "name": "converge-test",
+    "grid": {
+        "dermal_thickness_mm": [1],
+        "subcutis_thickness_factor": [1],
+        "patch_size_factor": [1],
+        "wound_width_factor": [0.5],
+        "mesh_size_factor": [0.2],
+        "skin_type": ["stiff"],
+        "orientation_deg": [0],
+    },
+    "shapes": {"wedge": {"wound_depth_factor": [0.3]}},
+}
+
+
+@pytest.fixture(scope="module")
+def run_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    from woundsweep.cli import main
+
+    tmp = tmp_path_factory.mktemp("converge")
+    (tmp / "sweep.yaml").write_text(yaml.safe_dump(SWEEP))
+    assert main(["generate", str(tmp / "sweep.yaml"), "--out", str(tmp / "run")]) == 0
+    return tmp / "run"
+
+
+@pytest.mark.fem
+def test_converge_writes_levels_orders_and_a_figure(run_dir: Path, capsys) -> None:
+    from woundsweep.cli import main
+
+    args = ["converge", str(run_dir), "--job", "0", "--levels", "3", "--ratio", "1.3"]
+    assert main([*args, "--stages", "1-3"]) == 0
+    out = capsys.readouterr().out
+    assert "p99 vM kPa" in out and "tau kPa" in out and "GCI %" in out
+    study = json.loads((run_dir / "convergence" / "job_0.json").read_text())
+    levels = study["levels"]
+    assert [lv["mesh_size_factor"] for lv in levels] == pytest.approx([0.2, 0.26, 0.338])
+    cells = [lv["cells"] for lv in levels]
+    assert cells[0] < cells[1] < cells[2]
+    assert study["size_ratio"] == pytest.approx(1.3 ** (2 / 3))
+    assert sorted(study["studies"]) == ["1", "2", "3"]
+    assert "closure_traction_kPa" in study["studies"]["3"]
+    assert "contact_force_mN" not in study["studies"]["3"]  # no contact before stage 4
+    # The stored study is the GCI of the stored values (f1 the finest level).
+    for stage, per_q in study["studies"].items():
+        for q, (s,) in per_q.items():
+            f3, f2, f1 = (lv["stages"][stage][q] for lv in levels)
+            ref = grid_study(f1, f2, f3, study["size_ratio"])
+            assert s["kind"] == ref.kind
+            for key in ("order", "extrapolated", "gci_fine"):
+                want = getattr(ref, key)
+                assert (s[key] is None and not math.isfinite(want)) or s[key] == pytest.approx(want)
+    png = (run_dir / "convergence" / "job_0.png").read_bytes()
+    assert png[:8] == b"\x89PNG\r\n\x1a\n"
+    # The level meshes are cached beside the study, not in the run's mesh cache.
+    assert len(list((run_dir / "convergence" / "meshes").glob("*.npz"))) == 3
+
+
+@pytest.mark.fem
+def test_solve_flags_interpenetration_and_stores_profiles(run_dir: Path) -> None:
+    import h5py
+
+    from woundsweep.cli import main
+    from woundsweep.model.profiles import PROFILE_POINTS
+
+    out = run_dir / "job0.h5"
+    assert main(["solve", str(run_dir), "--job", "0", "--stages", "1-3", "--out", str(out)]) == 0
+    with h5py.File(out, "r") as f:
+        rows = json.loads(f.attrs["stage_results"])
+        prof = {k: f[f"stage_{k}/profile_von_mises_kPa"][:] for k in (1, 2, 3)}
+        pts = f["stage_1/profile_points_mm"][:]
+        vm1 = f["stage_1/von_mises_kPa"][:]
+    assert [r["interpenetrating"] for r in rows[:2]] == [None, None]
+    assert rows[2]["interpenetrating"] == int(rows[2]["closure_gap_mm"] < 0)
+    assert pts.shape == (3, PROFILE_POINTS, 3) and prof[1].shape == (3, PROFILE_POINTS)
+    # Sampled values are cell values, the maxima are those of the profiles.
+    finite = prof[1][np.isfinite(prof[1])]
+    assert np.isin(finite, vm1).all()
+    for k, r in zip((1, 2, 3), rows):
+        assert r["profile_along_wound_max_kPa"] == pytest.approx(np.nanmax(prof[k][0]), rel=1e-6)
+        y_at = pts[0, np.nanargmax(prof[k][0]), 1]
+        assert r["profile_along_wound_max_at_mm"] == pytest.approx(y_at, abs=1e-6)

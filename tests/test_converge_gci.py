@@ -1,0 +1,85 @@
+"""Grid convergence math (`woundsweep.model.gci`) on analytic sequences; no DOLFINx."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from woundsweep.errors import WoundsweepError
+from woundsweep.model.convergence import level_factors
+from woundsweep.model.gci import SAFETY_FACTOR, grid_studies, grid_study
+
+
+def sequence(f0: float, C: float, p: float, h1: float, r: float, n: int) -> list[float]:
+    """f(h) = f0 + C h^p on h = h1 r^(n-1), ..., h1 r, h1 (coarse to fine)."""
+    return [f0 + C * (h1 * r**k) ** p for k in reversed(range(n))]
+
+
+@pytest.mark.parametrize(
+    ("f0", "C", "p", "r"),
+    [(30.0, 4.0, 2.0, 1.31), (30.0, -4.0, 1.0, 1.5), (-2.0, 0.7, 1.37, 2.0), (5.0, 1e-3, 0.5, 1.2)],
+)
+def test_analytic_sequence_gives_its_order_limit_and_error(f0, C, p, r) -> None:
+    f3, f2, f1 = sequence(f0, C, p, 0.2, r, 3)
+    s = grid_study(f1, f2, f3, r)
+    assert s.kind == "monotone"
+    assert s.ratio == pytest.approx(r**-p, rel=1e-9)
+    assert s.order == pytest.approx(p, rel=1e-9)
+    assert s.extrapolated == pytest.approx(f0, rel=1e-9, abs=1e-12)
+    # On an exact power law the GCI is Fs times the true relative error of the finest grid.
+    assert s.gci_fine == pytest.approx(SAFETY_FACTOR * abs((f1 - f0) / f1), rel=1e-8)
+
+
+def test_triples_of_a_longer_sequence_each_recover_the_law() -> None:
+    values = sequence(10.0, 3.0, 1.6, 0.1, 1.4, 5)
+    studies = grid_studies(values, 1.4)
+    assert len(studies) == 3
+    for s in studies:
+        assert s.order == pytest.approx(1.6, rel=1e-9) and s.extrapolated == pytest.approx(10.0)
+    # The finest triple has the smallest GCI (the error shrinks with h).
+    assert studies[-1].gci_fine < studies[0].gci_fine
+
+
+def test_order_is_the_documented_formula() -> None:
+    f1, f2, f3, r = 20.0, 20.9, 23.0, 1.31
+    p = math.log((f3 - f2) / (f2 - f1)) / math.log(r)
+    s = grid_study(f1, f2, f3, r)
+    assert s.order == pytest.approx(p, rel=1e-12)
+    assert s.extrapolated == pytest.approx(f1 + (f1 - f2) / (r**p - 1), rel=1e-12)
+
+
+@pytest.mark.parametrize(
+    ("values", "kind"),
+    [
+        ((36.2, 46.6, 34.0), "oscillatory"),  # the issue's stage-3 p99, coarse to fine
+        ((1.0, 2.0, 4.0), "divergent"),  # differences grow with refinement
+        ((3.0, 3.0, 4.0), "divergent"),  # e32 = 0, e21 != 0
+        ((5.0, 5.0, 5.0), "constant"),
+        ((5.0, math.nan, 5.0), "undefined"),
+    ],
+)
+def test_non_monotone_sequences_have_no_order(values, kind: str) -> None:
+    f3, f2, f1 = values
+    s = grid_study(f1, f2, f3, 1.3)
+    assert s.kind == kind
+    assert math.isnan(s.order)
+    if kind == "constant":
+        assert s.extrapolated == 5.0 and s.gci_fine == 0.0
+    else:
+        assert math.isnan(s.extrapolated) and math.isnan(s.gci_fine)
+
+
+def test_ratio_must_exceed_one() -> None:
+    with pytest.raises(ValueError, match="exceed 1"):
+        grid_study(1.0, 2.0, 3.0, 1.0)
+
+
+def test_level_factors() -> None:
+    assert level_factors(0.3, 3, 1.5) == pytest.approx([0.3, 0.45, 0.675])
+    assert level_factors(0.4, 3, 1.58113883)[-1] == pytest.approx(1.0)
+    for args, text in [((0.3, 2, 1.5), "at least 3"), ((0.3, 3, 1.0), "greater than 1"),
+                       ((0.5, 4, 1.5), "reach 1.69 > 1")]:  # fmt: skip
+        with pytest.raises(WoundsweepError, match=text) as exc:
+            level_factors(*args)
+        assert exc.value.exit_code == 2 and "\n" not in str(exc.value)

@@ -1,0 +1,177 @@
+"""Mesh convergence of one job: the stages on systematically refined meshes, with `gci`.
+
+Level k meshes the job's geometry (closure zone included) at mesh size factor m r^k, m the
+job's; every other mesh input is the job's. The size law scales every element size with
+s = (0.5 / m)^(2/3) (`woundsweep.mesh.sizing`), so the element-size ratio between levels is
+r_h = r^(2/3), the ratio the observed order and the GCI use. The meshes are cached under
+``RUN_DIR/convergence/meshes/`` (ids: the hash of their `GeometrySpec`); the study is written
+to ``RUN_DIR/convergence/job_<N>.json`` and drawn in ``job_<N>.png``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from ..errors import WoundsweepError
+from ..fsutil import atomic_write, atomic_write_bytes
+from ..schema import StageStatus
+from .gci import SAFETY_FACTOR, grid_studies
+
+__all__ = ["QUANTITIES", "convergence_study", "draw_study", "level_factors"]
+
+# Per-stage quantities of the study: result fields, and the stage-3 traction from the
+# diagnostics.
+QUANTITIES = (
+    "p99_von_mises_kPa",
+    "max_von_mises_kPa",
+    "closure_gap_mm",
+    "contact_force_mN",
+    "closure_traction_kPa",
+)
+
+
+def level_factors(mesh_size_factor: float, levels: int, ratio: float) -> list[float]:
+    """The mesh size factors m r^k, k = 0..levels-1 (WoundsweepError, exit 2, if invalid)."""
+    if levels < 3:
+        raise WoundsweepError(f"--levels {levels}: at least 3 levels are needed for an order")
+    if not ratio > 1:
+        raise WoundsweepError(f"--ratio {ratio:g}: must be greater than 1")
+    factors = [mesh_size_factor * ratio**k for k in range(levels)]
+    if factors[-1] > 1 + 1e-12:
+        raise WoundsweepError(
+            f"--levels {levels} --ratio {ratio:g} from the job's mesh size factor "
+            f"{mesh_size_factor:g} reach {factors[-1]:.3g} > 1 (the finest factor allowed)"
+        )
+    return [min(f, 1.0) for f in factors]
+
+
+def _stage_values(rec: Any) -> dict[str, Any]:
+    r = rec.result
+    ok = r.status == StageStatus.CONVERGED
+    row = {"status": str(r.status), "cells": r.cells, "dofs": r.dofs, "time_s": r.time_s}
+    for q in QUANTITIES:
+        v = getattr(r, q, None) if q in r._fields else rec.extra.get(q)
+        row[q] = float(v) if ok and v is not None and math.isfinite(v) else None
+    return row
+
+
+def convergence_study(
+    run_dir: str | Path,
+    job_index: int,
+    levels: int = 3,
+    ratio: float = 1.5,
+    stages: tuple[int, int] = (1, 6),
+    echo: Callable[[str], None] | None = None,
+    jit: dict[str, Any] | None = None,
+) -> dict[str, Any]:
+    """Solve job ``job_index`` at each level, write and return the study (JSON-ready dict)."""
+    from ..mesh.cache import get_mesh
+    from ..mesh.sizing import SIZE_LAW, _size_scale
+    from ..sweep.grid import canonical_hash, load_run
+    from .job import job_model, job_row, job_spec, run_stages
+
+    say = echo or (lambda _line: None)
+    run = load_run(run_dir)
+    row = job_row(run, job_index)
+    base = job_spec(run, row)
+    factors = level_factors(base.mesh_size_factor, levels, ratio)
+    out_dir = run.run_dir / "convergence"
+    level_rows = []
+    for k, m in enumerate(factors):
+        spec = dataclasses.replace(base, mesh_size_factor=m)
+        mesh = get_mesh(out_dir, canonical_hash(spec.to_dict()), spec).mesh
+        say(f"level {k}: mesh size factor {m:.4g}, {mesh.info['cells']} cells")
+        model, materials = job_model(run, row, mesh, jit)
+        records = run_stages(model, materials, stages[1])
+        level_rows.append(
+            {
+                "mesh_size_factor": m,
+                "relative_size": _size_scale(m),
+                "cells": int(mesh.info["cells"]),
+                "stages": {
+                    str(rec.result.stage): _stage_values(rec)
+                    for rec in records
+                    if rec.result.stage >= stages[0]
+                },
+            }
+        )
+        del model
+    size_ratio = ratio ** SIZE_LAW["factor_exponent"]
+    studies: dict[str, dict[str, list[dict[str, Any]]]] = {}
+    for stage in level_rows[0]["stages"]:
+        per_q = {}
+        for q in QUANTITIES:
+            values = [lv["stages"][stage][q] for lv in level_rows]
+            if all(v is None for v in values):
+                continue
+            vals = [math.nan if v is None else v for v in values]
+            per_q[q] = [s._asdict() for s in grid_studies(vals, size_ratio)]
+        studies[stage] = per_q
+    study = {
+        "job_index": int(job_index),
+        "job_id": str(row["job_id"]),
+        "geometry": base.describe(),
+        "factor_ratio": ratio,
+        "size_ratio": size_ratio,
+        "safety_factor": SAFETY_FACTOR,
+        "levels": level_rows,
+        "studies": studies,
+        "units": "mm, kPa, mN, s; gci_fine is a fraction of the finest value",
+    }
+    path = out_dir / f"job_{int(job_index)}.json"
+    atomic_write_bytes(path, (json.dumps(_jsonable(study), indent=1) + "\n").encode())
+    study["json"] = str(path)
+    study["figure"] = str(draw_study(study, out_dir / f"job_{int(job_index)}.png"))
+    return study
+
+
+def _jsonable(x: Any) -> Any:
+    """NaN and inf as null (strict JSON)."""
+    if isinstance(x, float) and not math.isfinite(x):
+        return None
+    if isinstance(x, dict):
+        return {k: _jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_jsonable(v) for v in x]
+    return x
+
+
+def draw_study(study: dict[str, Any], path: Path) -> Path:
+    """Each quantity against the relative element size, one line per stage; the finest
+    triple's Richardson extrapolation at size 0 (hollow marker)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from matplotlib.figure import Figure
+
+    panels = ("p99_von_mises_kPa", "max_von_mises_kPa", "closure_gap_mm", "contact_force_mN")
+    fig = Figure(figsize=(10, 7), layout="constrained")
+    axes = fig.subplots(2, 2).ravel()
+    sizes = [lv["relative_size"] for lv in study["levels"]]
+    for ax, q in zip(axes, panels):
+        for stage in study["levels"][0]["stages"]:
+            ys = [lv["stages"][stage][q] for lv in study["levels"]]
+            if all(y is None for y in ys):
+                continue
+            ys = [math.nan if y is None else y for y in ys]
+            color = f"C{int(stage) - 1}"  # one colour per stage in every panel
+            ax.plot(sizes, ys, "o-", color=color, label=f"stage {stage}")
+            fin = study["studies"].get(stage, {}).get(q)
+            if fin and fin[-1]["kind"] == "monotone":
+                ax.plot([0.0], [fin[-1]["extrapolated"]], "o", mfc="none", color=color)
+        ax.set_xlabel("relative element size s = (0.5 / m)^(2/3)")
+        ax.set_ylabel(q)
+        ax.set_xlim(left=0.0)
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=8)
+    fig.suptitle(
+        f"job {study['job_index']}: {study['geometry']} (hollow: Richardson extrapolation)",
+        fontsize=9,
+    )
+    atomic_write(path, lambda tmp: fig.savefig(tmp, format="png", dpi=110))
+    return path

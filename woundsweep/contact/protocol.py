@@ -10,22 +10,9 @@ from typing import Any, NamedTuple, Protocol
 
 import numpy as np
 
-__all__ = ["GPA_TO_KPA", "ContactModel", "ContactPairs", "ContactSummary"]
+__all__ = ["GPA_TO_KPA", "ContactModel", "ContactSummary"]
 
 GPA_TO_KPA = 1.0e6  # stiffness in GPa -> kPa
-
-
-class ContactPairs(NamedTuple):
-    """Active contact points of both passes at one state."""
-
-    slave: np.ndarray  # (na, 3) nodes of the slave facet that holds the point
-    bary: np.ndarray  # (na, 3) the point's shape function values on that facet
-    master: np.ndarray  # (na, 3) master facet nodes
-    gap_mm: np.ndarray  # (na,) signed gap: < 0 penetrating, tiny >= 0 touching (no force)
-    stiffness: np.ndarray  # (na,) c = w k_V A_q / h, mN/mm
-    size_mm: np.ndarray  # (na,) h of the slave facet
-    n_deep: int  # points left out because -g > max_depth_mm (0 when all is well)
-    weight: np.ndarray  # (na,) edge fade w in (0, 1]; 1 where the projection is on the facet
 
 
 class ContactSummary(NamedTuple):
@@ -35,15 +22,13 @@ class ContactSummary(NamedTuple):
     max_penetration_mm: float  # max -g (0 if none)
     max_penetration_rel: float  # max -g / h_s
     contact_force_mN: float  # total normal contact force, sum of c (-g)
-    n_deep: int
 
 
 class ContactModel(Protocol):
     """A penalty contact term of the potential: energy, forces and tangent at a state.
 
-    ``k_V_kPa`` is the penalty (0 switches the contact terms off). A formulation whose
-    linearisation holds a discrete choice (a pairing) fixes it with `freeze`, checks it at a
-    converged state with `refresh` and releases it with `unfreeze`.
+    ``k_V_kPa`` is the penalty (0 switches the contact terms off). The energy is C1 in ``u``
+    and its residual and tangent are exact derivatives: Newton needs no other hook.
     """
 
     k_V_kPa: float
@@ -61,18 +46,6 @@ class ContactModel(Protocol):
 
     def add_jacobian(self, A: Any, u: np.ndarray) -> None:
         """Add the contact tangent at ``u`` to an assembled PETSc matrix and re-finalise it."""
-        ...
-
-    def freeze(self, u: np.ndarray) -> None:
-        """Fix the linearisation's discrete choices at ``u``."""
-        ...
-
-    def refresh(self, u: np.ndarray, tol: float) -> bool:
-        """Choose afresh at ``u``; True if that moves the forces by more than ``tol`` (mN)."""
-        ...
-
-    def unfreeze(self) -> None:
-        """Choose afresh at every state again."""
         ...
 
     def summary(self, u: np.ndarray) -> ContactSummary:

@@ -263,7 +263,6 @@ def job_model(run: Any, row: Any, mesh: Any, jit: dict[str, Any] | None = None) 
             settings=NewtonSettings.from_mapping(solver),
             jit=jit,
             contact_penalty_GPa=tuple(run.sweep.stages["contact_penalty_GPa"]),
-            closure_load=str(run.sweep.stages["closure_load"]),
         )
     except ValueError as err:  # the mesh's tags or numbering do not fit the contract
         raise GeometryError(f"job {job_index}: unusable mesh: {err}") from None

@@ -14,7 +14,6 @@ from collections.abc import Mapping
 from typing import Any
 
 __all__ = [
-    "CLOSURE_LOADS",
     "CONTACT_PENALTY_GPA",
     "SKIN_TYPES",
     "STAGE_SETTINGS",
@@ -55,14 +54,10 @@ class ClosureZone:
 
 
 CONTACT_PENALTY_GPA = (1.0, 5.0, 100.0)  # k_V of stages 4, 5 and 6
-# The closure traction in stages 4-6: a dead load on the stage-2 area, or a follower load on
-# the current one (each load increment's state, updated at convergence until it holds).
-CLOSURE_LOADS = ("dead", "follower")
 
 STAGE_SETTINGS: dict[str, Any] = {
     "closure_zone": dataclasses.asdict(ClosureZone()),
     "contact_penalty_GPa": list(CONTACT_PENALTY_GPA),
-    # The contact formulation of stages 4-6: "surface" (`woundsweep.contact`) is the only one.
-    "contact_model": "surface",
-    "closure_load": CLOSURE_LOADS[0],
+    # The contact formulation of stages 4-6: "smooth" (`woundsweep.contact`) is the only one.
+    "contact_model": "smooth",
 }

@@ -22,9 +22,6 @@ __all__ = ["WoundProblem"]
 class WoundProblem:
     """Residual R(u), tangent dR/du and potential of the wound model at the state ``forms.u``.
 
-    ``closure_follows``: the closure traction of stages 4-6 follows the deformed area (each
-    load increment's state, moved to the converged state in `refresh`) instead of being a
-    dead load on the stage-2 area.
     """
 
     def __init__(
@@ -32,10 +29,8 @@ class WoundProblem:
         domain: WoundDomain,
         forms: WoundForms,
         contact: ContactModel | None,
-        closure_follows: bool = False,
     ) -> None:
         self.domain, self.forms, self.contact = domain, forms, contact
-        self.closure_follows = closure_follows
         self.A = compat.create_matrix(forms.a_form)
 
     def _contact_on(self) -> ContactModel | None:
@@ -69,19 +64,6 @@ class WoundProblem:
         if c is not None:
             e += c.energy(self.solution())
         return e
-
-    def refresh(self, tol: float) -> bool:
-        """At a converged state: re-search a frozen contact pairing and move a following
-        closure traction's area state to the current one; True if either moved the forces
-        by more than ``tol`` (mN), so Newton goes on."""
-        u = self.solution()
-        c = self._contact_on()
-        moved = c is not None and c.refresh(u, tol)
-        if self.closure_follows and float(self.forms.follow.value) == 0.0 and not moved:
-            r_old = self.residual_array()
-            self.forms.u_area.x.array[:] = u
-            moved = bool(np.linalg.norm(self.residual_array() - r_old) > tol)
-        return moved
 
     def min_det(self, u: np.ndarray) -> float:
         return self.domain.min_det(u)

@@ -32,7 +32,7 @@ from ..solver.settings import NewtonSettings
 from .domain import WoundDomain, dof_rows
 from .forms import WoundForms
 from .materials import HomogeneousState, JobMaterials, homogeneous_state
-from .parameters import CLOSURE_LOADS, CONTACT_PENALTY_GPA, ClosureZone
+from .parameters import CONTACT_PENALTY_GPA, ClosureZone
 from .problem import WoundProblem
 from .stability import lowest_eigenvalues
 
@@ -66,10 +66,7 @@ class WoundModel:
         settings: NewtonSettings | None = None,
         jit: dict[str, Any] | None = None,
         contact_penalty_GPa: tuple[float, float, float] = CONTACT_PENALTY_GPA,
-        closure_load: str = CLOSURE_LOADS[0],
     ) -> None:
-        if closure_load not in CLOSURE_LOADS:
-            raise ValueError(f"closure_load must be one of {CLOSURE_LOADS}, not {closure_load!r}")
         if len(contact_penalty_GPa) != 3:
             raise ValueError("contact_penalty_GPa needs three values (stages 4, 5, 6)")
         self.contact_penalty_kPa = tuple(float(k) * GPA_TO_KPA for k in contact_penalty_GPa)
@@ -77,11 +74,9 @@ class WoundModel:
         self.contact: ContactModel | None = None
         if d.has_wound:
             left, right = split_wound_flanks(d.X, d.cell_nodes, d.wound_facets(), d.x_c)
-            # Deeper "penetrations" are not overlaps of facing flanks but the far side of the
-            # wound; the wound's depth bounds any overlap that closure can produce.
-            self.contact = FlankContact(d.X, left, right, max_depth_mm=d.wound_depth)
+            self.contact = FlankContact(d.X, left, right)
         self.forms = WoundForms(d, quadrature_degree, jit)
-        self.problem = WoundProblem(d, self.forms, self.contact, closure_load == "follower")
+        self.problem = WoundProblem(d, self.forms, self.contact)
         self.newton = NewtonSolver(self.problem, self.problem.A, settings or NewtonSettings())
         self.materials: JobMaterials | None = None
         self.homogeneous: dict[int, HomogeneousState] = {}
@@ -92,7 +87,7 @@ class WoundModel:
 
     @property
     def settings(self) -> NewtonSettings:
-        """Newton's settings (the contact stages derive theirs with `for_contact`)."""
+        """Newton's settings."""
         return self.newton.settings
 
     @property
@@ -266,7 +261,7 @@ class WoundModel:
         k_from, k_to, load, scale = self._contact_load(stage, rows)
         # The residual of a penetrating start holds penalty forces far above the physical
         # ones: they must not set the convergence tolerance (a fixed force scale).
-        policy = Policy(self.settings.for_contact(), energy_merit=True, fixed_scale=True)
+        policy = Policy(self.settings, energy_merit=True, fixed_scale=True)
         try:
             decades = np.log10(k_to / k_from)
             res = continuation(
@@ -274,7 +269,6 @@ class WoundModel:
             )
         finally:
             c.k_V_kPa = k_to
-            c.unfreeze()
         diag: dict[str, float] = {}
         if res.status != StageStatus.CONVERGED:
             # Stalled at a stable state, or at a limit point of the path? (stability.py)
@@ -292,7 +286,6 @@ class WoundModel:
                 "max_penetration_mm": summ.max_penetration_mm,
                 "max_penetration_rel": summ.max_penetration_rel,
                 "contact_force_mN": summ.contact_force_mN,
-                "contact_deep_points": summ.n_deep,
                 "contact_detect_time_s": detect,
                 "contact_assembly_time_s": assemble,
                 "contact_searches": searches,
@@ -321,20 +314,13 @@ class WoundModel:
         # under the stage-3 loads (contact off); stages 5 and 6 start from an equilibrium
         # with contact at k_from, so only its convergence residual is left to release.
         c.k_V_kPa = 0.0 if stage == 4 else k_from
-        if stage > 4:
-            c.freeze(u)
         offset = self.problem.residual_array()
         offset[rows] = 0.0
         values = u[rows].copy()
         scale = float(np.linalg.norm(self.problem.internal_force()))
-        follows = self.problem.closure_follows
-        u_area = self.forms.u_area.x.array
 
         def load(s: float) -> LoadState:
             c.k_V_kPa = k_from ** (1.0 - s) * k_to**s
-            c.freeze(u)  # the pairing of the last converged state; Newton refreshes it
-            if follows:
-                u_area[:] = u  # likewise the closure traction's area
             return LoadState(values, (1.0 - s) * offset)
 
         return k_from, k_to, load, scale
@@ -343,14 +329,12 @@ class WoundModel:
         """Lowest eigenvalue nearest zero (mN/mm) of the free-dof tangent at the current state
         with penalty ``k_V_kPa`` (NaN if it cannot be computed). With the dead closure load
         every load is dead, so the tangent is the Hessian of the total potential and its sign
-        decides the stability of that equilibrium (with ``closure_load="follower"`` it is the
-        Hessian with the traction's area state held, its load stiffness left out)."""
+        decides the stability of that equilibrium."""
         c = self.contact
         assert c is not None
         A = self.problem.A
         saved = c.k_V_kPa
         c.k_V_kPa = k_V_kPa
-        c.freeze(self.u)
         free = np.ones(A.getSize()[0], dtype=bool)
         free[rows] = False
         try:
@@ -363,5 +347,4 @@ class WoundModel:
                 eig = float("nan")
         finally:
             c.k_V_kPa = saved
-            c.unfreeze()
         return {"stability_min_eig_mN_per_mm": eig, "stability_penalty_kPa": k_V_kPa}

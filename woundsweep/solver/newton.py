@@ -21,11 +21,12 @@ symbolic factorisation is done once per matrix and only the numeric one per step
 
 Convergence (``stol`` is relative to the problem's length scale ``ell``):
 ``||R_free||_2 <= atol + rtol * f_scale`` and ``max |g - u| <= stol * ell`` and the last
-increment ``||du||_inf <= stol * ell``. ``f_scale`` is the larger of the given force scale
-and the current full residual norm (reactions included), unless ``Policy.fixed_scale``. When
-the residual test passes but the increment test does not, one chord step (reusing the
-factorisation) measures the increment. At a converged state the problem's `refresh` hook
-may report that a frozen part of its linearisation moved the forces: Newton then goes on.
+increment ``||du||_inf <= stol * ell``, where that last increment must be a full Newton step
+(fresh tangent, gamma = 1, no shift): a state that meets the tolerances after a damped or
+shifted update is not yet converged; Newton takes a full step from it and tests again, so a
+converged state is one a full, undamped step leaves within the tolerances. ``f_scale`` is
+the larger of the given force scale and the current full residual norm (reactions
+included), unless ``Policy.fixed_scale``.
 
 Statuses (`woundsweep.schema.StageStatus`): converged, max-iterations, diverged (non-finite or
 exploding residual, or no acceptable relaxation), inverted (every relaxation inverts an
@@ -83,11 +84,6 @@ class NonlinearProblem(Protocol):
     def energy(self) -> float | None:
         """The potential (mN mm) whose gradient is R at the current state, or None when the
         loads have none (a follower load)."""
-        ...
-
-    def refresh(self, tol: float) -> bool:
-        """At a converged state: update a frozen part of the linearisation (the contact
-        pairing); True if that moved the forces by more than ``tol`` (mN)."""
         ...
 
     def min_det(self, u: np.ndarray) -> float:
@@ -148,7 +144,6 @@ class NewtonSolver:
         pc.setFactorSolverType("mumps")
         self.ksp.setErrorIfNotConverged(False)
         self._factored = False
-        self._factored_rows = np.zeros(0, dtype=np.int32)
         self.gamma = 1.0
         self._mu = 0.0  # the last shift that gave a descent step (`_shifted`; see `reset`)
 
@@ -195,7 +190,6 @@ class NewtonSolver:
             self._factored = True
         self.ksp.setUp()
         self.ksp.getPC().setUp()  # numeric factorisation now, so it is timed on its own
-        self._factored_rows = rows.copy()
         return t1 - t0, time.perf_counter() - t1
 
     def _linear_solve(self, rhs: np.ndarray) -> np.ndarray | None:
@@ -246,7 +240,7 @@ class NewtonSolver:
         res_norm = math.inf
         scale = force_scale
         it = 0
-        chord_done = False
+        full = False  # the last update was a full Newton step (fresh tangent, gamma = 1)
 
         def result(status: str) -> NewtonResult:
             return NewtonResult(status, it, res_norm, scale, min_det, t_asm, t_fac, t_sol, t_res)
@@ -270,38 +264,15 @@ class NewtonSolver:
                 last_inc,
                 self.gamma,
             )
-            if res_ok and bc_ok and last_inc <= st.stol * ell:
-                # A problem that froze part of its linearisation (the contact pairing) checks
-                # it at the converged state; if a new one moves the forces, iterate on.
-                if self.problem.refresh(st.atol + st.rtol * scale):
-                    r, dt = self._residual(offset)
-                    t_res += dt
-                    last_inc = math.inf
-                    chord_done = False
-                    continue
+            if res_ok and bc_ok and full and last_inc <= st.stol * ell:
                 return result(CONVERGED)
             if res_norm > st.divergence_factor * max(scale, st.atol):
                 return result(DIVERGED)
-            rhs = -r_free
-            rhs[rows] = bc_err
-            same_rows = np.array_equal(rows, self._factored_rows)
-            if res_ok and bc_ok and self._factored and same_rows and not chord_done:
-                # Chord step: the residual is small; measure the increment with the old factors.
-                t0 = time.perf_counter()
-                du = self._linear_solve(rhs)
-                t_sol += time.perf_counter() - t0
-                chord_done = True
-                if du is not None:
-                    u += du
-                    last_inc = float(np.max(np.abs(du), initial=0.0))
-                    min_det = self.problem.min_det(u)
-                    r, dt = self._residual(offset)
-                    t_res += dt
-                    continue
             if it >= st.max_iterations:
                 return result(MAX_ITERATIONS)
             it += 1
-            chord_done = False
+            rhs = -r_free
+            rhs[rows] = bc_err
             try:
                 ta, tf = self._factor(rows)
                 t_asm += ta
@@ -311,9 +282,20 @@ class NewtonSolver:
                 t_sol += time.perf_counter() - t0
             except PETSc.Error:
                 return result(LINEAR_SOLVER_FAILED)
-
-            # Adaptive relaxation: limit the update size, then back off on inversion/growth.
             u0 = u.copy()
+            if res_ok and bc_ok and du is not None:
+                # The convergence check: a full, undamped Newton step from a state that meets
+                # the tolerances must meet them again and be smaller than stol.
+                u += du
+                min_det = self.problem.min_det(u)
+                if min_det > 0:
+                    r, dt = self._residual(offset)
+                    t_res += dt
+                    last_inc = float(np.max(np.abs(du), initial=0.0))
+                    full = True
+                    continue
+                u[:] = u0
+            # Adaptive relaxation: limit the update size, then back off on inversion/growth.
             prescribing = not bc_ok
             merit = self._policy.energy_merit and not prescribing
             e0 = self._energy(offset) if merit else None
@@ -323,8 +305,10 @@ class NewtonSolver:
             step: _Step | str = LINEAR_SOLVER_FAILED
             if du is not None:
                 step = self._relax(u0, du, r_free, free, offset, limit, e0, prescribing)
+            shifted = False
             if isinstance(step, str) and e0 is not None:
                 step = self._shifted(u0, rhs, r_free, free, offset, e0)
+                shifted = True
                 if not isinstance(step, str):
                     t_fac += step.factor_time_s
             if isinstance(step, str):
@@ -333,6 +317,7 @@ class NewtonSolver:
             t_res += step.residual_time_s
             r, min_det = step.r, step.min_det
             last_inc = float(np.max(np.abs(u - u0), initial=0.0))
+            full = step.gamma == 1.0 and not shifted
             self.gamma = step.gamma if step.shrunk else min(1.0, 2.0 * step.gamma)
 
     def _relax(
@@ -359,8 +344,10 @@ class NewtonSolver:
         st = self._policy.settings
         u = self.problem.solution()
         strain = self.problem.max_strain(du)
-        gamma = min(self.gamma, st.max_strain_step / strain) if strain > 0 else self.gamma
-        shrunk = gamma < self.gamma
+        # Under the energy merit every step starts from gamma = 1 (Armijo backtracking).
+        start = 1.0 if e0 is not None else self.gamma
+        gamma = min(start, st.max_strain_step / strain) if strain > 0 else start
+        shrunk = gamma < start
         slope = float(np.dot(r_free, du))
         if e0 is not None and not slope < 0.0:
             return DIVERGED  # uphill: the tangent is indefinite along du (`_shifted`)
@@ -426,7 +413,4 @@ class NewtonSolver:
                 mu *= 10.0
         except PETSc.Error:
             return LINEAR_SOLVER_FAILED
-        finally:
-            # The factors are of a shifted matrix: no chord step may reuse them.
-            self._factored_rows = np.zeros(0, dtype=np.int32)
         return DIVERGED

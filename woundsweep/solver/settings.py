@@ -24,15 +24,6 @@ class NewtonSettings:
     gamma_min: float = 1.0 / 64.0  # smallest relaxation factor tried
     residual_growth: float = 4.0  # accept an update while ||R|| grows by at most this factor
     divergence_factor: float = 1e6  # ||R|| above this times the force scale: diverged
-    # The contact stages' residual is only piecewise smooth (a contact point that changes its
-    # master facet turns its force by the facets' angle), and Newton cannot resolve it below
-    # the size of those jumps: their residual tolerance is looser. Abaqus' default force
-    # tolerance, for comparison, is 5e-3 of the average force.
-    contact_rtol: float = 1e-4
-    # Frictionless sliding leaves the flanks' tangential position nearly free, so the contact
-    # stages' increment tolerance is looser too.
-    contact_residual_growth: float = 1.0
-    contact_stol: float = 1e-5
 
     @classmethod
     def from_mapping(cls, values: Mapping[str, Any] | None) -> NewtonSettings:
@@ -45,12 +36,3 @@ class NewtonSettings:
                 cast = {"int": int, "bool": bool}.get(str(f.type), float)
                 kwargs[f.name] = cast(values[f.name])
         return cls(**kwargs)
-
-    def for_contact(self) -> NewtonSettings:
-        """The contact stages' settings: the looser contact tolerances and residual rule."""
-        return dataclasses.replace(
-            self,
-            rtol=max(self.rtol, self.contact_rtol),
-            stol=max(self.stol, self.contact_stol),
-            residual_growth=self.contact_residual_growth,
-        )

@@ -27,7 +27,7 @@ from ..analysis.settings import ModelSettings
 from ..errors import GeometryError, StoreError, SweepError
 from ..fsutil import read_small_text
 from ..mesh.spec import GeometrySpec
-from ..model.parameters import CLOSURE_LOADS, STAGE_SETTINGS, TABLE2
+from ..model.parameters import STAGE_SETTINGS, TABLE2
 from ..solver.settings import NewtonSettings
 from .rules import compile_rule, evaluate_rule
 
@@ -106,13 +106,11 @@ DEFAULTS: dict[str, Any] = {
     "analysis": dataclasses.asdict(ModelSettings()),
 }
 SETTINGS = tuple(DEFAULTS)
-CHOICES = {
-    "stages.contact_model": ("surface",),
-    "stages.closure_load": CLOSURE_LOADS,
-}  # the string-valued settings
+CHOICES = {"stages.contact_model": ("smooth",)}  # the string-valued settings
 # String-setting values refused with a message of their own.
+_GONE = "was removed; the only contact model is 'smooth' (docs/model.md, 'Contact')"
 REMOVED_CHOICES = {
-    "stages.contact_model": {"depth": "'depth' was removed; the only contact model is 'surface'"},
+    "stages.contact_model": {"depth": f"'depth' {_GONE}", "surface": f"'surface' {_GONE}"},
 }
 TOP_KEYS = ("name", "description", "grid", "shapes", "exclude", *SETTINGS)
 

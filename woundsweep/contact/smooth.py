@@ -1,0 +1,298 @@
+"""Two-pass penalty contact of the wound flanks on smooth implicit surfaces (stages 4-6).
+
+Formulation (docs/model.md, "Contact"):
+
+- Points. The contact points of a flank are its nodes (those not shared with the other
+  flank, where the flanks meet), each carrying a third of the reference area of its facets,
+  A_q, and their size h_q (`woundsweep.contact.surfaces.surface`).
+- Gap. g_q = phi(x_q), phi the implicit surface of the other flank's deformed facets
+  (`woundsweep.contact.implicit`): the kernel radius of a facet is ``radius_factor`` times its
+  reference size. phi is C2 in every node position, across facet edges included, so a point
+  sliding over the master has a force and a tangent that turn smoothly; there is no pairing
+  to choose, freeze or refresh. g < 0 is penetration.
+- Energy. Pi_c = sum_q (w / 2) (k_V / h_q) A_q <-g_q>^2, w = 1/2 as each flank is slave once
+  and master once: the pressure per reference area is k_V (-g) / h, so k_V has stress units
+  and the penetration at pressure p is p h / k_V.
+- Linearisation. Exact: residual c g dg and tangent c (dg dg^T + g d2g) of every point with
+  g < 0, c = w k_V A / h, with the derivatives of the quotient phi = N / D.
+
+A point sees the master facets whose centroid lies within their kernel radius (a KD-tree
+query at every new state, cheap: the kernel vanishes with two derivatives at its radius, so
+the set can change without a jump). Evaluations are cached by the flank node positions.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any, NamedTuple
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from .implicit import pair_terms
+from .protocol import ContactSummary
+from .surfaces import surface
+
+__all__ = ["TWO_PASS_WEIGHT", "FlankContact"]
+
+TWO_PASS_WEIGHT = 0.5  # each flank is slave once and master once
+
+
+class _Pass(NamedTuple):
+    """One pass: the slave flank's contact points against the master flank's facets."""
+
+    nodes: np.ndarray  # (nq,) slave nodes
+    area_mm2: np.ndarray  # (nq,) reference area per point
+    size_mm: np.ndarray  # (nq,) h per point
+    facets: np.ndarray  # (nf, 3) master facets, outward
+    rho_mm: np.ndarray  # (nf,) kernel radius per master facet
+
+
+class _State(NamedTuple):
+    """Gaps and derivatives of the engaged points at one state (both passes)."""
+
+    gap_all: np.ndarray  # (nq_total,) gap of every point (+inf where no master is near)
+    weight_all: np.ndarray  # (nq_total,) w A / h per point, mm (c = k_V w A / h)
+    size_all: np.ndarray  # (nq_total,)
+    gap: np.ndarray  # (na,) engaged points (g < 0)
+    weight: np.ndarray  # (na,)
+    dofs: np.ndarray  # (na, L) local dofs (padded with 0)
+    grad: np.ndarray  # (na, L) dg in local dofs (0 in padding)
+    hess: np.ndarray | None  # (na, L, L) d2g
+
+
+def _lumped(X: np.ndarray, facets: np.ndarray, nodes: np.ndarray) -> np.ndarray:
+    """A third of the reference area of the facets around each of ``nodes``."""
+    p = X[facets]
+    area = 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
+    per_node = np.bincount(facets.ravel(), weights=np.repeat(area / 3.0, 3), minlength=len(X))
+    return per_node[nodes]
+
+
+class FlankContact:
+    """Two-pass penalty between two surfaces on their implicit surfaces (module docstring).
+
+    ``X`` (n, 3) reference node coordinates; ``left`` and ``right`` (k, 3) outward-oriented
+    facets in node numbering. ``k_V_kPa`` (attribute) is the penalty; 0 switches the contact
+    terms off (gaps and penetrations are still measured).
+    """
+
+    def __init__(
+        self, X: np.ndarray, left: np.ndarray, right: np.ndarray, *, radius_factor: float = float(__import__("os").environ.get("WS_RHO", 1.5))
+    ) -> None:
+        self.X = np.asarray(X, dtype=float)
+        self.n_dofs = 3 * len(self.X)
+        sides = (np.asarray(left, dtype=np.int64), np.asarray(right, dtype=np.int64))
+        surfs = tuple(surface(self.X, f) for f in sides)
+        shared = np.intersect1d(surfs[0].nodes, surfs[1].nodes)
+        passes = []
+        for i in (0, 1):
+            sl, ms = surfs[i], surfs[1 - i]
+            keep = ~np.isin(sl.nodes, shared)
+            p = self.X[ms.facets]
+            m_area = 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
+            rho = radius_factor * np.sqrt(4.0 * m_area / np.sqrt(3.0))
+            passes.append(
+                _Pass(sl.nodes[keep], _lumped(self.X, sl.facets, sl.nodes[keep]),
+                      sl.size_mm[keep], ms.facets, rho)
+            )  # fmt: skip
+        self.passes = tuple(passes)
+        self.nodes = np.union1d(surfs[0].nodes, surfs[1].nodes)  # every node whose position matters
+        self.radius_factor = float(radius_factor)
+        self.k_V_kPa = 0.0
+        self._cache_x: np.ndarray | None = None
+        self._cache: dict[bool, _State] = {}
+        self.reset_timers()
+
+    def positions(self, u: np.ndarray) -> np.ndarray:
+        """Deformed coordinates (n, 3) of all nodes for flat displacement dofs ``u``."""
+        return self.X + np.asarray(u).reshape(-1, 3)
+
+    # -- evaluation ---------------------------------------------------------------------------
+
+    def _pairs(self, x: np.ndarray, ps: _Pass) -> tuple[np.ndarray, np.ndarray]:
+        """(point, facet) index pairs with the point inside the facet's kernel radius."""
+        t0 = time.perf_counter()
+        cen = x[ps.facets].mean(axis=1)
+        tree = cKDTree(cen)
+        hits = tree.query_ball_point(x[ps.nodes], r=float(ps.rho_mm.max()))
+        count = np.fromiter((len(h) for h in hits), dtype=np.int64, count=len(hits))
+        q = np.repeat(np.arange(len(hits)), count)
+        f = np.fromiter((j for h in hits for j in h), dtype=np.int64, count=int(count.sum()))
+        d2 = np.sum((x[ps.nodes[q]] - cen[f]) ** 2, axis=1)
+        near = d2 < ps.rho_mm[f] ** 2
+        self.detect_time_s += time.perf_counter() - t0
+        self.searches += 1
+        return q[near], f[near]
+
+    def _evaluate_pass(self, x: np.ndarray, ps: _Pass, hessian: bool) -> tuple[Any, ...]:
+        q, f = self._pairs(x, ps)
+        nq = len(ps.nodes)
+        mf = ps.facets[f]
+        t = pair_terms(x[ps.nodes[q]], x[mf[:, 0]], x[mf[:, 1]], x[mf[:, 2]], ps.rho_mm[f], hessian)
+        N = np.bincount(q, weights=t.N, minlength=nq)
+        D = np.bincount(q, weights=t.D, minlength=nq)
+        gap = np.full(nq, np.inf)
+        seen = D > 0.0
+        gap[seen] = N[seen] / D[seen]
+        act_pt = np.flatnonzero(gap < 0.0)
+        keep = np.isin(q, act_pt)
+        q, mf = q[keep], mf[keep]
+        t = type(t)(*(None if a is None else a[keep] for a in t))
+        # Local node numbering per engaged point: slot 0 is the point's own node.
+        rank = np.full(nq, -1, dtype=np.int64)
+        rank[act_pt] = np.arange(len(act_pt))
+        qa = rank[q]
+        pair_nodes = np.concatenate([ps.nodes[q][:, None], mf], axis=1)  # (P, 4)
+        key = qa[:, None] * len(x) + pair_nodes
+        own = rank[act_pt] * len(x) + ps.nodes[act_pt]
+        uniq, inv = np.unique(np.concatenate([own, key.ravel()]), return_inverse=True)
+        pt_of = uniq // len(x)
+        first = np.searchsorted(pt_of, np.arange(len(act_pt)))
+        slot = np.arange(len(uniq)) - first[pt_of]
+        L = int(slot.max()) + 1 if len(uniq) else 1
+        loc = slot[inv[len(own):]].reshape(-1, 4)  # local slot of each pair node
+        node_of = np.zeros((len(act_pt), L), dtype=np.int64)
+        node_of[pt_of, slot] = uniq % len(x)
+        na = len(act_pt)
+        g = gap[act_pt]
+        Dq = D[act_pt]
+        # dg = (dN - g dD) / D, gathered into local dofs (slot * 3 + component).
+        ldof = (3 * loc[:, :, None] + np.arange(3)).reshape(-1, 12)
+        rows = np.repeat(qa, 12)
+        dphi = (t.dN - g[qa, None] * t.dD) / Dq[qa, None]
+        grad = np.zeros((na, 3 * L))
+        np.add.at(grad, (rows, ldof.ravel()), dphi.ravel())
+        hess = None
+        if hessian:
+            dD = np.zeros((na, 3 * L))
+            np.add.at(dD, (rows, ldof.ravel()), t.dD.ravel())
+            dD /= Dq[:, None]
+            hess = np.zeros((na, 3 * L, 3 * L))
+            loc_h = (t.d2N - g[qa, None, None] * t.d2D) / Dq[qa, None, None]
+            r_i = np.repeat(ldof, 12, axis=1).ravel()
+            c_i = np.tile(ldof, (1, 12)).ravel()
+            np.add.at(hess, (np.repeat(qa, 144), r_i, c_i), loc_h.ravel())
+            outer = grad[:, :, None] * dD[:, None, :]
+            hess -= outer + np.transpose(outer, (0, 2, 1))
+        dofs = (3 * node_of[:, :, None] + np.arange(3)).reshape(na, 3 * L)
+        weight = TWO_PASS_WEIGHT * ps.area_mm2 / ps.size_mm
+        return gap, weight, g, weight[act_pt], dofs, grad, hess
+
+    def _state(self, u: np.ndarray, hessian: bool) -> _State:
+        """Gaps and derivatives at ``u`` (cached by the flank node positions; a state with the
+        Hessian serves requests without)."""
+        x = self.positions(u)
+        xn = x[self.nodes]
+        if self._cache_x is None or not np.array_equal(xn, self._cache_x):
+            self._cache.clear()
+            self._cache_x = xn.copy()
+        for key in (True,) if hessian else (False, True):
+            if key in self._cache:
+                return self._cache[key]
+        t0 = time.perf_counter()
+        parts = [self._evaluate_pass(x, ps, hessian) for ps in self.passes]
+        L = max(p[4].shape[1] for p in parts)
+
+        def pad(a: np.ndarray, square: bool) -> np.ndarray:
+            w = L - a.shape[1]
+            return np.pad(a, [(0, 0), (0, w)] + ([(0, w)] if square else []))
+
+        st = _State(
+            np.concatenate([p[0] for p in parts]),
+            np.concatenate([p[1] for p in parts]),
+            np.concatenate([ps.size_mm for ps in self.passes]),
+            np.concatenate([p[2] for p in parts]),
+            np.concatenate([p[3] for p in parts]),
+            np.concatenate([pad(p[4], False) for p in parts]),
+            np.concatenate([pad(p[5], False) for p in parts]),
+            np.concatenate([pad(p[6], True) for p in parts]) if hessian else None,
+        )
+        self._cache[hessian] = st
+        self.evaluations += 1
+        self.assembly_time_s += time.perf_counter() - t0
+        return st
+
+    # -- energy, forces, tangent ----------------------------------------------------------------
+
+    def energy(self, u: np.ndarray) -> float:
+        """Penalty energy (mN mm) at ``u``."""
+        st = self._state(u, hessian=False)
+        return float(0.5 * self.k_V_kPa * np.sum(st.weight * st.gap**2))
+
+    def force_vector(self, u: np.ndarray) -> np.ndarray:
+        """Contact contribution to the residual, dPi_c/du (flat, mN)."""
+        st = self._state(u, hessian=False)
+        f = (self.k_V_kPa * st.weight * st.gap)[:, None] * st.grad
+        return np.bincount(st.dofs.ravel(), weights=f.ravel(), minlength=self.n_dofs)
+
+    def tangent_csr(self, u: np.ndarray) -> Any:
+        """Contact tangent d2Pi_c/du2 as a scipy CSR matrix (n_dofs square)."""
+        import scipy.sparse
+
+        st = self._state(u, hessian=True)
+        assert st.hess is not None
+        t0 = time.perf_counter()
+        c = self.k_V_kPa * st.weight[:, None, None]
+        K = c * (st.grad[:, :, None] * st.grad[:, None, :] + st.gap[:, None, None] * st.hess)
+        L = st.dofs.shape[1]
+        rows = np.repeat(st.dofs, L, axis=1).ravel()
+        cols = np.tile(st.dofs, (1, L)).ravel()
+        M = scipy.sparse.coo_matrix((K.ravel(), (rows, cols)), shape=(self.n_dofs,) * 2).tocsr()
+        M.sum_duplicates()
+        self.assembly_time_s += time.perf_counter() - t0
+        return M
+
+    def add_residual(self, b: Any, u: np.ndarray) -> None:
+        """Add the contact forces to an assembled PETSc residual vector ``b`` (serial)."""
+        if self.k_V_kPa <= 0.0:
+            return
+        f = self.force_vector(u)
+        arr = b.getArray()
+        arr += f[: len(arr)]
+
+    def add_jacobian(self, A: Any, u: np.ndarray) -> None:
+        """Add the contact tangent to an assembled PETSc matrix ``A`` and re-finalise it.
+
+        New couplings grow the sparsity pattern (allocation errors are switched off for ``A``).
+        """
+        if self.k_V_kPa <= 0.0:
+            return
+        from petsc4py import PETSc
+
+        K = self.tangent_csr(u)
+        if K.nnz == 0:
+            return
+        t0 = time.perf_counter()
+        A.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
+        A.setValuesCSR(
+            K.indptr.astype(PETSc.IntType),
+            K.indices.astype(PETSc.IntType),
+            K.data.astype(PETSc.ScalarType),
+            addv=PETSc.InsertMode.ADD_VALUES,
+        )
+        A.assemble()
+        self.assembly_time_s += time.perf_counter() - t0
+
+    # -- reporting ------------------------------------------------------------------------------
+
+    def summary(self, u: np.ndarray) -> ContactSummary:
+        """Penetration and compressive normal force of the state ``u`` at the current
+        ``k_V_kPa``, over every contact point."""
+        st = self._state(u, hessian=False)
+        depth = np.maximum(-st.gap_all, 0.0)
+        depth[~np.isfinite(depth)] = 0.0
+        force = float(self.k_V_kPa * np.sum(st.weight_all * depth))
+        pen = depth > 0.0
+        if not pen.any():
+            return ContactSummary(0, 0.0, 0.0, force)
+        return ContactSummary(
+            int(pen.sum()), float(depth.max()), float(np.max(depth / st.size_all)), force
+        )
+
+    def reset_timers(self) -> None:
+        """Zero the counters: search time, assembly time, evaluations, searches."""
+        self.detect_time_s = 0.0  # cumulative: neighbour searches
+        self.assembly_time_s = 0.0  # cumulative: gaps, residual and tangent contributions
+        self.evaluations = 0
+        self.searches = 0

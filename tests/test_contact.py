@@ -1,11 +1,11 @@
 """Contact geometry and penalty (woundsweep.contact) without DOLFINx.
 
-Gap derivatives and penalty forces are checked against central finite differences, the
-point-triangle distance, the facet orientation and the flank split against hand-computed
-answers, and the total contact force against the module's penalty law: per contact point of
-reference area A_q on a slave facet of size h, stiffness c = w k_V A_q / h with w = 1/2 (two
-passes), force c (-g); so a uniform overlap d between two matching surfaces of area A gives
-2 passes x (1/2) k_V d A / h = k_V d A / h, the pressure p = k_V d / h times A.
+The implicit surface's derivatives and the penalty's forces and tangent are checked against
+central finite differences; its gap against exact answers (a plane; concentric cylinders,
+where the gap error must fall like h^2); sliding across facet edges against continuity of the
+force and quadratic convergence of Newton; the facet orientation and flank split against
+hand-computed answers; the total contact force against the penalty law (per contact point of
+reference area A_q and size h, stiffness c = w k_V A_q / h with w = 1/2, two passes).
 """
 
 from __future__ import annotations
@@ -15,12 +15,7 @@ import pytest
 from box_mesh import boundary_facets, box_tets
 
 from woundsweep.contact import GPA_TO_KPA, FlankContact, orient_outward, split_wound_flanks
-from woundsweep.contact.geometry import (
-    barycentric_derivatives,
-    fade_weight,
-    gap_derivatives,
-    point_triangle_distance,
-)
+from woundsweep.contact.implicit import pair_terms
 
 # -- helpers -----------------------------------------------------------------------------------
 
@@ -55,128 +50,205 @@ def two_squares(n_left: int, n_right: int):
     return X, tl, tr, np.arange(len(pl), len(X))
 
 
-def facet_size(n: int) -> float:
-    """Contact size h of a facet of `square_grid`: equilateral side of area 1 / (2 n^2)."""
-    return float(np.sqrt(4.0 * (0.5 / n**2) / np.sqrt(3.0)))
+def cylinder_surface(n_theta: int, n_y: int, radius: float, outward: float, first: int = 0):
+    """Triangulated half-cylinder x^2 + z^2 = radius^2, z <= 0, y in [0, 2]; facet normals
+    point to ``outward`` times the radial direction. Returns (points, facets)."""
+    th = np.linspace(np.pi, 2 * np.pi, n_theta + 1)
+    ys = np.linspace(0.0, 2.0, n_y + 1)
+    T, Y = np.meshgrid(th, ys, indexing="ij")
+    pts = np.c_[radius * np.cos(T.ravel()), Y.ravel(), radius * np.sin(T.ravel())]
+    idx = lambda i, j: first + i * (n_y + 1) + j  # noqa: E731
+    i, j = (a.ravel() for a in np.meshgrid(range(n_theta), range(n_y), indexing="ij"))
+    tri = np.concatenate([np.c_[idx(i, j), idx(i + 1, j), idx(i + 1, j + 1)],
+                          np.c_[idx(i, j), idx(i + 1, j + 1), idx(i, j + 1)]])  # fmt: skip
+    local = np.vstack([np.zeros((first, 3)), pts])
+    c = local[tri].mean(axis=1)
+    radial = c * np.array([1.0, 0.0, 1.0])
+    flip = np.einsum("ij,ij->i", normals(local, tri), radial) * outward < 0
+    tri[flip, 1], tri[flip, 2] = tri[flip, 2].copy(), tri[flip, 1].copy()
+    return pts, tri
 
 
-def random_triangles(rng: np.random.Generator, N: int):
-    """Random well-shaped triangles (|m| >= 0.5, no edge below 0.4) and random points."""
-    out = []
-    while sum(len(o[0]) for o in out) < N:
-        x1, x2, x3 = (rng.normal(size=(4 * N, 3)) for _ in range(3))
-        xs = rng.normal(size=(4 * N, 3))
-        m = np.linalg.norm(np.cross(x2 - x1, x3 - x1), axis=1)
-        edges = np.minimum.reduce([np.linalg.norm(x2 - x1, axis=1),
-                                   np.linalg.norm(x3 - x2, axis=1),
-                                   np.linalg.norm(x1 - x3, axis=1)])  # fmt: skip
-        ok = (m >= 0.5) & (edges >= 0.4)
-        out.append((xs[ok], x1[ok], x2[ok], x3[ok]))
-    return tuple(np.concatenate([o[k] for o in out])[:N] for k in range(4))
+def make_contact(X, left, right) -> FlankContact:
+    c = FlankContact(X, left, right)
+    c.k_V_kPa = 1.0 * GPA_TO_KPA
+    return c
 
 
-def gap_of_q(q: np.ndarray) -> np.ndarray:
-    """g for stacked coordinates q (..., 12) = (xs, x1, x2, x3)."""
-    shape = q.shape[:-1]
-    q = q.reshape(-1, 12)
-    g, _, _ = gap_derivatives(q[:, 0:3], q[:, 3:6], q[:, 6:9], q[:, 9:12], hessian=False)
-    return g.reshape(shape)
+def penetrating_state(rng, X, right_nodes, depth: float, noise: float) -> np.ndarray:
+    """The right surface pushed by ``depth`` into the left (-x), plus random noise."""
+    U = noise * rng.standard_normal(X.shape)
+    U[right_nodes, 0] -= depth
+    return U.ravel()
 
 
-def grad_of_q(q: np.ndarray) -> np.ndarray:
-    """dg/dq (..., 12) for stacked coordinates q (..., 12)."""
-    shape = q.shape
-    q = q.reshape(-1, 12)
-    _, grad, _ = gap_derivatives(q[:, 0:3], q[:, 3:6], q[:, 6:9], q[:, 9:12], hessian=False)
-    return grad.reshape(shape)
+@pytest.fixture(scope="module")
+def squares():
+    # Non-matching triangulations (3 x 3 against 4 x 4).
+    return two_squares(3, 4)
 
 
-# -- gap_derivatives ------------------------------------------------------------------------
+# -- the implicit surface ---------------------------------------------------------------------
 
 
-def test_gap_is_the_signed_distance_above_a_triangle_in_the_xy_plane() -> None:
-    # Triangle (0,0,0), (2,0,0), (0,2,0): normal (2 e_x) x (2 e_y) / |..| = +e_z.
-    x1 = np.array([[0.0, 0.0, 0.0]] * 3)
-    x2 = np.array([[2.0, 0.0, 0.0]] * 3)
-    x3 = np.array([[0.0, 2.0, 0.0]] * 3)
-    xs = np.array([[0.5, 0.5, 0.75], [0.5, 0.5, -0.25], [5.0, -3.0, 1.5]])
-    g, grad, H = gap_derivatives(xs, x1, x2, x3)
-    np.testing.assert_allclose(g, [0.75, -0.25, 1.5], rtol=0, atol=1e-15)
-    # dg/dxs = n = e_z. Moving the triangle up by t lowers g by t: sum of the master parts is -n.
-    np.testing.assert_allclose(grad[:, 0:3], [[0, 0, 1]] * 3, atol=1e-15)
-    np.testing.assert_allclose(grad[:, 3:6] + grad[:, 6:9] + grad[:, 9:12], [[0, 0, -1]] * 3,
-                               atol=1e-15)  # fmt: skip
-    # Hand-computed: lifting vertex x2 by t tilts the plane; for xs = (0.5, 0.5, z) the plane
-    # height under xs is t * (barycentric weight of x2 at (0.5, 0.5)) = t / 4, and with the
-    # tilt the normal distance is (z - t/4) cos(angle): first order dg/dz2 = -1/4.
-    assert grad[0, 8] == pytest.approx(-0.25, abs=1e-14)
-    assert grad[0, 11] == pytest.approx(-0.25, abs=1e-14)
-    assert grad[0, 5] == pytest.approx(-0.5, abs=1e-14)
-    # Sliding a vertex within the plane leaves the plane, hence g, unchanged to first order.
-    np.testing.assert_allclose(grad[:, [3, 4, 6, 7, 9, 10]], 0.0, atol=1e-15)
-    assert H is not None and H.shape == (3, 12, 12)
+def test_pair_terms_derivatives_match_central_differences() -> None:
+    rng = np.random.default_rng(0)
+    P = 20
+    x1 = rng.normal(size=(P, 3))
+    x2, x3 = x1 + rng.normal(size=(P, 3)), x1 + rng.normal(size=(P, 3))
+    x = (x1 + x2 + x3) / 3 + 0.4 * rng.normal(size=(P, 3))
+    rho = np.full(P, 2.5)
+    q = np.concatenate([x, x1, x2, x3], axis=1)
+
+    def terms(q):
+        return pair_terms(q[:, 0:3], q[:, 3:6], q[:, 6:9], q[:, 9:12], rho)
+
+    t, eps = terms(q), 1e-6
+    assert np.all(t.D > 0)  # every pair inside its kernel
+    for f, df, d2f in (("N", "dN", "d2N"), ("D", "dD", "d2D")):
+        g, H = np.zeros((P, 12)), np.zeros((P, 12, 12))
+        for j in range(12):
+            e = np.zeros(12)
+            e[j] = eps
+            tp, tm = terms(q + e), terms(q - e)
+            g[:, j] = (getattr(tp, f) - getattr(tm, f)) / (2 * eps)
+            H[:, :, j] = (getattr(tp, df) - getattr(tm, df)) / (2 * eps)
+        np.testing.assert_allclose(getattr(t, df), g, atol=1e-7)
+        np.testing.assert_allclose(getattr(t, d2f), H, atol=1e-6)
 
 
-def test_gap_gradient_matches_central_differences() -> None:
-    rng = np.random.default_rng(1)
-    xs, x1, x2, x3 = random_triangles(rng, 40)
-    q = np.concatenate([xs, x1, x2, x3], axis=1)
-    _, grad, _ = gap_derivatives(xs, x1, x2, x3, hessian=False)
-    h = 1e-6
-    E = np.eye(12) * h
-    fd = (gap_of_q(q[:, None, :] + E) - gap_of_q(q[:, None, :] - E)) / (2 * h)
-    err = np.linalg.norm(fd - grad, axis=1) / np.linalg.norm(grad, axis=1)
-    assert err.max() < 1e-6
-
-
-def test_gap_hessian_matches_central_differences() -> None:
+def test_gap_is_the_signed_distance_to_a_plane(squares) -> None:
+    """Two flat faces: the implicit gap of every node is its x-offset (exact on a plane)."""
+    X, left, right, rnodes = squares
+    c = make_contact(X, left, right)
     rng = np.random.default_rng(2)
-    xs, x1, x2, x3 = random_triangles(rng, 25)
-    q = np.concatenate([xs, x1, x2, x3], axis=1)
-    g, grad, H = gap_derivatives(xs, x1, x2, x3)
-    assert H is not None
-    np.testing.assert_allclose(H, np.transpose(H, (0, 2, 1)), atol=1e-12)
-    # Second central differences of g itself: (g(++) - g(+-) - g(-+) + g(--)) / (4 h^2).
-    h = 1e-4
-    E = np.eye(12) * h
-    Ei, Ej = E[:, None, :], E[None, :, :]
-    qq = q[:, None, None, :]
-    fd = (gap_of_q(qq + Ei + Ej) - gap_of_q(qq + Ei - Ej) - gap_of_q(qq - Ei + Ej)
-          + gap_of_q(qq - Ei - Ej)) / (4 * h * h)  # fmt: skip
-    err = np.linalg.norm(fd - H, axis=(1, 2)) / np.linalg.norm(H, axis=(1, 2))
-    assert err.max() < 1e-4
-    # And the Hessian is the derivative of the analytic gradient (tighter: first differences).
-    h = 1e-6
-    E = np.eye(12) * h
-    dgrad = (grad_of_q(q[:, None, :] + E) - grad_of_q(q[:, None, :] - E)) / (2 * h)
-    # dgrad[n, j, i] = d grad_i / d q_j = H[n, i, j]
-    err = np.linalg.norm(dgrad - np.transpose(H, (0, 2, 1)), axis=(1, 2))
-    assert (err / np.linalg.norm(H, axis=(1, 2))).max() < 1e-6
+    U = np.zeros_like(X)
+    U[rnodes, 0] = 0.05 * rng.standard_normal(len(rnodes))  # right nodes moved along x only
+    # (the left face, the right face's master, stays flat: a right node's gap is its offset)
+    g = c.gaps(U.ravel())
+    right_pts = c.passes[1].nodes
+    np.testing.assert_allclose(g[len(c.passes[0].nodes) :], U[right_pts, 0], atol=1e-12)
 
 
-# -- point_triangle_distance ----------------------------------------------------------------
+def test_concentric_cylinders_gap_converges_like_h_squared() -> None:
+    """Inner flank r = 1 (normals out), outer flank r = 1 - d (normals in): every node of the
+    inner one overlaps the outer surface by d. The faceted master lies inside its circle by at
+    most the sagitta, so the gap error must fall like h^2 (observed order near 2)."""
+    d = 0.01
+    errs, hs = [], []
+    for n in (8, 16, 32):
+        pi, ti = cylinder_surface(n, n // 2, 1.0, +1.0)
+        po, to = cylinder_surface(n + 3, (n + 3) // 2, 1.0 - d, -1.0, first=len(pi))
+        X = np.vstack([pi, po])
+        c = make_contact(X, ti, to)
+        g = c.gaps(np.zeros(X.size))[: len(c.passes[0].nodes)]
+        inner = c.passes[0].nodes
+        theta = np.arctan2(X[inner, 2], X[inner, 0])
+        mid = (theta < -0.2) & (theta > -np.pi + 0.2)  # away from the surfaces' edges
+        errs.append(float(np.max(np.abs(g[mid] + d))))
+        hs.append(np.pi / (n + 3))
+    order = np.polyfit(np.log(hs), np.log(errs), 1)[0]
+    assert 1.7 < order < 2.5, (order, errs)
+    assert errs[-1] < 0.5 * hs[-1] ** 2, (errs, hs)  # a fraction of the sagitta's scale
 
 
-def test_point_triangle_distance_hand_computed() -> None:
-    a, b, c = np.array([0.0, 0, 0]), np.array([1.0, 0, 0]), np.array([0.0, 1, 0])
-    p = np.array([
-        [0.25, 0.25, 2.0],  # over the interior: |g| = 2; barycentric (0.5, 0.25, 0.25)
-        [0.5, -1.0, 1.0],  # beyond edge ab: nearest (0.5, 0, 0), sqrt(1 + 1)
-        [2.0, -1.0, -3.0],  # beyond vertex b: sqrt(1 + 1 + 9)
-        [1.0, 1.0, 0.0],  # beyond the hypotenuse, in the plane: nearest (0.5, 0.5, 0)
-        [-0.5, 0.5, -0.5],  # beyond edge ca: nearest (0, 0.5, 0), sqrt(0.25 + 0.25)
-    ])  # fmt: skip
-    dist, g, bmin = point_triangle_distance(p, a, b, c)
-    np.testing.assert_allclose(dist, [2.0, np.sqrt(2), np.sqrt(11), np.sqrt(0.5), np.sqrt(0.5)],
-                               rtol=1e-14)  # fmt: skip
-    np.testing.assert_allclose(g, [2.0, 1.0, -3.0, 0.0, -0.5], atol=1e-15)
-    # Barycentric coordinates of the projection: (1 - b - c, b, c) with b = x, c = y.
-    np.testing.assert_allclose(bmin, [0.25, -1.0, -1.0, -1.0, -0.5], atol=1e-15)
-    # Broadcast over leading axes: (2 points, 1) against (1, 3 triangles).
-    tri_b = np.stack([b, 2 * b, 3 * b])[None]
-    d2, _, _ = point_triangle_distance(p[:2, None, :], a[None, None], tri_b, c[None, None])
-    assert d2.shape == (2, 3)
-    assert d2[0, 0] == pytest.approx(2.0)
+# -- FlankContact -----------------------------------------------------------------------------
+
+
+def test_force_is_the_gradient_of_the_energy_and_tangent_its_derivative(squares) -> None:
+    X, left, right, rnodes = squares
+    c = make_contact(X, left, right)
+    u = penetrating_state(np.random.default_rng(1), X, rnodes, 0.05, 0.01)
+    f, K = c.force_vector(u), c.tangent_csr(u).toarray()
+    eps = 1e-7
+    fd, Kfd = np.zeros_like(f), np.zeros_like(K)
+    for j in range(len(u)):
+        e = np.zeros_like(u)
+        e[j] = eps
+        fd[j] = (c.energy(u + e) - c.energy(u - e)) / (2 * eps)
+        Kfd[:, j] = (c.force_vector(u + e) - c.force_vector(u - e)) / (2 * eps)
+    assert np.abs(f).max() > 1e3 and np.abs(K).max() > 1e4  # a real contact state
+    np.testing.assert_allclose(f, fd, atol=1e-9 * np.abs(f).max())
+    np.testing.assert_allclose(K, Kfd, atol=1e-8 * np.abs(K).max())
+    np.testing.assert_allclose(K, K.T, atol=1e-12 * np.abs(K).max())
+
+
+def test_uniform_overlap_gives_pressure_k_V_d_over_h() -> None:
+    """Matching faces pushed together by d: total force k_V d A / h (A = 1), h the node size."""
+    X, left, right, rnodes = two_squares(4, 4)
+    c = make_contact(X, left, right)
+    d = 1e-3
+    U = np.zeros_like(X)
+    U[rnodes, 0] = -d
+    s = c.summary(U.ravel())
+    h = c.passes[0].size_mm[0]
+    np.testing.assert_allclose(c.passes[0].size_mm, h)
+    assert s.contact_force_mN == pytest.approx(c.k_V_kPa * d / h, rel=1e-12)
+    assert s.n_penetrating == 2 * 25 and s.max_penetration_mm == pytest.approx(d, rel=1e-12)
+    c.k_V_kPa = 0.0
+    assert c.energy(U.ravel()) == 0.0 and c.summary(U.ravel()).contact_force_mN == 0.0
+
+
+def test_separated_faces_have_no_force(squares) -> None:
+    X, left, right, rnodes = squares
+    c = make_contact(X, left, right)
+    U = np.zeros_like(X)
+    U[rnodes, 0] = 0.01  # right face moved away: open gap
+    u = U.ravel()
+    assert c.energy(u) == 0.0 and not np.any(c.force_vector(u))
+    assert c.summary(u).n_penetrating == 0
+
+
+def test_sliding_across_facet_edges_is_smooth_and_newton_is_quadratic() -> None:
+    """A flat slave patch (rigid, one normal dof w) pressed by a load P onto a faceted
+    half-cylinder master while it slides along the axis over many facet edges. At each slide
+    position Newton solves for w; its error must fall quadratically. Along the path w must be
+    continuous: halving the slide step shrinks the largest change between samples (toward
+    half of it; a jump would keep it)."""
+    pm, tm = cylinder_surface(12, 9, 1.0, +1.0)  # master, normals out
+    s = np.linspace(-0.15, 0.15, 4)
+    Y, Xs = np.meshgrid(s, s, indexing="ij")
+    ps = np.c_[Xs.ravel(), Y.ravel() + 0.3, np.full(Y.size, -1.0)]
+    n0 = len(pm)
+    k = lambda i, j: n0 + i * 4 + j  # noqa: E731
+    i, j = (a.ravel() for a in np.meshgrid(range(3), range(3), indexing="ij"))
+    ts = np.concatenate([np.c_[k(i, j), k(i + 1, j), k(i + 1, j + 1)],
+                         np.c_[k(i, j), k(i + 1, j + 1), k(i, j + 1)]])  # fmt: skip
+    X = np.vstack([pm, ps])
+    flip = normals(X, ts)[:, 2] < 0  # the slave faces the master (normals +z)
+    ts[flip, 1], ts[flip, 2] = ts[flip, 2].copy(), ts[flip, 1].copy()
+    c = FlankContact(X, tm, ts)
+    c.k_V_kPa = 1e3
+    slave = np.arange(n0, len(X))
+    load = 0.05  # mN pressing the slave up (+z)
+    dz = np.zeros(X.size)
+    dz[3 * slave + 2] = 1.0
+
+    def equilibrium(slide: float) -> float:
+        U = np.zeros_like(X)
+        U[slave, 1] = slide
+        w, err = 0.02, []  # start pressed in: every slave node engaged
+        for _ in range(30):
+            U[slave, 2] = w
+            u = U.ravel()
+            r = c.force_vector(u) @ dz - load  # the contact reaction balances the load
+            err.append(abs(r))
+            if abs(r) < 1e-13:
+                break
+            w -= r / float(dz @ (c.tangent_csr(u) @ dz))
+        assert err[-1] < 1e-13, err
+        e = np.array([v for v in err if v > 1e-11])
+        if len(e) >= 3:  # quadratic: e_{i+1} <= C e_i^2
+            assert np.all(e[2:] / e[1:-1] ** 2 < 1e3), err
+        assert c.summary(U.ravel()).contact_force_mN == pytest.approx(load, rel=0.02)
+        return w
+
+    period = 2.0 / 9  # the master's facet length along y
+    coarse = np.array([equilibrium(t) for t in np.linspace(0.0, 2 * period, 41)])
+    fine = np.array([equilibrium(t) for t in np.linspace(0.0, 2 * period, 81)])
+    assert np.ptp(coarse) > 0  # the path does cross the facets' structure
+    assert np.abs(np.diff(fine)).max() <= 0.75 * np.abs(np.diff(coarse)).max()
+    np.testing.assert_allclose(fine[::2], coarse, rtol=0, atol=1e-15)
 
 
 # -- orient_outward, split_wound_flanks -----------------------------------------------------
@@ -237,358 +309,3 @@ def test_split_wound_flanks_by_centroid_x() -> None:
     # With the mirror plane elsewhere everything is on one side.
     left2, right2 = split_wound_flanks(X, cells, wound, x_c=0.5)
     assert len(left2) == 16 and len(right2) == 0
-
-
-# -- FlankContact -----------------------------------------------------------------------------
-
-
-def penetrating_state(rng: np.random.Generator, X: np.ndarray, right_nodes: np.ndarray,
-                      depth: float, noise: float) -> np.ndarray:  # fmt: skip
-    """Flat displacement: the right surface pushed by ``depth`` into the left (-x), plus a
-    random displacement of every node of size ``noise``."""
-    U = noise * rng.standard_normal(X.shape)
-    U[right_nodes, 0] -= depth
-    return U.ravel()
-
-
-def assert_same_pairing(contact: FlankContact, ref, u: np.ndarray) -> None:
-    """The active pairs at ``u`` are those of ``ref`` (a `ContactPairs`): finite differences
-    then see a smooth function. (The evaluation at ``u`` stays cached for the next call.)"""
-    b = contact.pairs(u)
-    assert len(ref.gap_mm) == len(b.gap_mm)
-    np.testing.assert_array_equal(ref.master, b.master)
-    np.testing.assert_array_equal(ref.slave, b.slave)
-    np.testing.assert_array_equal(ref.bary, b.bary)
-
-
-def make_contact(X, left, right, **kw) -> FlankContact:
-    kw.setdefault("max_depth_mm", 0.5)
-    c = FlankContact(X, left, right, **kw)
-    c.k_V_kPa = 1.0 * GPA_TO_KPA
-    return c
-
-
-@pytest.fixture(scope="module")
-def squares():
-    # Non-matching triangulations (3 x 3 against 4 x 4), so that the contact points of one
-    # surface fall at generic places of the other's facets.
-    return two_squares(3, 4)
-
-
-def test_force_vector_is_the_gradient_of_the_energy(squares) -> None:
-    X, left, right, rnodes = squares
-    contact = make_contact(X, left, right)
-    rng = np.random.default_rng(5)
-    u0 = penetrating_state(rng, X, rnodes, depth=0.03, noise=0.01)
-    f = contact.force_vector(u0)
-    pr = contact.pairs(u0)
-    assert np.all(pr.gap_mm < 0) and len(pr.gap_mm) > 0.8 * 6 * (len(left) + len(right))
-    assert np.any(pr.weight < 1.0)  # points in an edge fade band are covered too
-    h = 1e-6
-    fd = np.empty_like(u0)
-    for i in range(len(u0)):
-        e = np.zeros_like(u0)
-        e[i] = h
-        assert_same_pairing(contact, pr, u0 + e)
-        ep = contact.energy(u0 + e)
-        assert_same_pairing(contact, pr, u0 - e)
-        fd[i] = (ep - contact.energy(u0 - e)) / (2 * h)
-    assert np.linalg.norm(fd - f) <= 1e-7 * np.linalg.norm(f)
-    # Action = reaction: no net force, and on the right surface it pushes toward -x in the
-    # residual (the contact force on the right body is +x: out of the left body).
-    F = f.reshape(-1, 3)
-    np.testing.assert_allclose(F.sum(axis=0), 0.0, atol=1e-9 * np.abs(F).max())
-    assert F[rnodes, 0].sum() < 0
-
-
-@pytest.mark.parametrize("exact_depth_rel", [np.inf, 1e-3])
-def test_tangent_is_the_derivative_of_the_force(squares, exact_depth_rel: float) -> None:
-    """With the geometric term everywhere (exact_depth_rel = inf, the default) at a deep generic
-    state; with the quasi-Newton cut-off 1e-3 at a state where every |g| <= 1e-3 h (the term is then kept)."""
-    X, left, right, rnodes = squares
-    contact = make_contact(X, left, right, exact_depth_rel=exact_depth_rel)
-    rng = np.random.default_rng(6)
-    if np.isfinite(exact_depth_rel):
-        # Shallow state: in-plane noise only (both surfaces stay flat), overlap 1e-4 while
-        # h = 0.27 (4 x 4) and 0.36 (3 x 3): the geometric term is ~1e-4 of the tangent.
-        u0 = penetrating_state(rng, X, rnodes, depth=0.0, noise=0.01)
-        U = u0.reshape(-1, 3)
-        U[:, 0] = 0.0
-        U[rnodes, 0] = -1e-4
-        pr = contact.pairs(u0)
-        assert np.all(np.abs(pr.gap_mm) <= exact_depth_rel * pr.size_mm)
-    else:
-        u0 = penetrating_state(rng, X, rnodes, depth=0.03, noise=0.01)
-    pr = contact.pairs(u0)
-    K = contact.tangent_csr(u0).toarray()
-    np.testing.assert_allclose(K, K.T, atol=1e-10 * np.abs(K).max())
-    h = 1e-7
-    fd = np.empty_like(K)
-    for i in range(len(u0)):
-        e = np.zeros_like(u0)
-        e[i] = h
-        assert_same_pairing(contact, pr, u0 + e)
-        fp = contact.force_vector(u0 + e)
-        assert_same_pairing(contact, pr, u0 - e)
-        fd[:, i] = (fp - contact.force_vector(u0 - e)) / (2 * h)
-    assert np.linalg.norm(fd - K) <= 1e-6 * np.linalg.norm(K)
-
-
-def test_uniform_overlap_gives_pressure_k_V_d_over_h() -> None:
-    """Matching surfaces (n x n each) overlapped by d everywhere. Every contact point of both
-    passes has g = -d; c = (1/2) k_V A_q / h, sum of A_q over one pass = A = 1 mm^2, so the
-    total normal force is 2 * (1/2) k_V d A / h = k_V d / h (mN with kPa, mm) and it acts in x:
-    +x on the right body (the residual holds minus the force on a node)."""
-    n = 3
-    X, left, right, rnodes = two_squares(n, n)
-    contact = make_contact(X, left, right)
-    h = facet_size(n)
-    d = 2e-3
-    for k_gpa in (1.0, 5.0, 100.0):
-        contact.k_V_kPa = k_gpa * GPA_TO_KPA
-        U = np.zeros_like(X)
-        U[rnodes, 0] = -d
-        u = U.ravel()
-        expected = contact.k_V_kPa * d / h  # p A, A = 1
-        f = contact.force_vector(u).reshape(-1, 3)
-        assert -f[rnodes, 0].sum() == pytest.approx(expected, rel=1e-12)
-        lnodes = np.setdiff1d(np.arange(len(X)), rnodes)
-        assert f[lnodes, 0].sum() == pytest.approx(expected, rel=1e-12)
-        np.testing.assert_allclose(f[:, 1:], 0.0, atol=1e-12 * expected)
-        s = contact.summary(u)
-        assert s.n_penetrating == 2 * 6 * len(left)  # both passes, 6 points per facet
-        assert s.max_penetration_mm == pytest.approx(d, rel=1e-12)
-        assert s.max_penetration_rel == pytest.approx(d / h, rel=1e-12)
-        assert s.contact_force_mN == pytest.approx(expected, rel=1e-12)
-        assert s.n_deep == 0
-        assert contact.energy(u) == pytest.approx(0.5 * expected * d, rel=1e-12)
-
-
-def test_summary_touching_separated_deep_and_switched_off() -> None:
-    X, left, right, rnodes = two_squares(2, 2)
-    contact = make_contact(X, left, right, max_depth_mm=0.01)
-    U = np.zeros_like(X)
-    # Touching: every point engaged at g = 0, no force, no penetration.
-    pr = contact.pairs(U.ravel())
-    assert len(pr.gap_mm) == 2 * 6 * len(left) and np.all(pr.gap_mm == 0)
-    assert contact.summary(U.ravel()) == (0, 0.0, 0.0, 0.0, 0)
-    assert not np.any(contact.force_vector(U.ravel()))
-    # Separated: no pairs.
-    U[rnodes, 0] = 0.05
-    assert len(contact.pairs(U.ravel()).gap_mm) == 0
-    assert contact.summary(U.ravel()) == (0, 0.0, 0.0, 0.0, 0)
-    # Deeper than max_depth_mm: left out and counted.
-    U[rnodes, 0] = -0.02
-    s = contact.summary(U.ravel())
-    assert s.n_deep == 2 * 6 * len(left) and s.n_penetrating == 0
-    assert not np.any(contact.force_vector(U.ravel()))
-    # k_V = 0: penetrations measured, no forces.
-    U[rnodes, 0] = -0.005
-    contact.k_V_kPa = 0.0
-    s = contact.summary(U.ravel())
-    assert s.n_penetrating == 2 * 6 * len(left)
-    assert s.max_penetration_mm == pytest.approx(0.005)
-    assert s.contact_force_mN == 0.0
-    assert not np.any(contact.force_vector(U.ravel()))
-
-
-def test_flanks_that_do_not_face_each_other_are_not_in_contact() -> None:
-    """Both surfaces oriented +x (a smooth continuation, not two facing flanks): n_s . n = 1 >
-    normal_cos = 0, so an overlap is not taken for penetration."""
-    pl, tl = square_grid(2, 0.0, +1.0, 0)
-    pr, tr = square_grid(2, 0.0, +1.0, len(pl))
-    X = np.vstack([pl, pr])
-    contact = make_contact(X, tl, tr)
-    U = np.zeros_like(X)
-    U[len(pl) :, 0] = -0.01
-    assert len(contact.pairs(U.ravel()).gap_mm) == 0
-
-
-def test_frozen_pairing_engages_live_and_refresh_reports_a_new_pairing(squares) -> None:
-    """Frozen mode (used by the stages): the pairing of `freeze` is kept while engagement
-    follows the state; `refresh` re-searches and says whether the forces changed."""
-    X, left, right, rnodes = squares
-    contact = make_contact(X, left, right)
-    U = np.zeros_like(X)
-    U[rnodes, 0] = 0.01  # apart by 0.01 < h: every point is a candidate, none engaged
-    contact.freeze(U.ravel())
-    searches = contact.searches
-    assert len(contact.pairs(U.ravel()).gap_mm) == 0
-    U[rnodes, 0] = -0.001  # pushed in: engaged with the frozen pairing, no new search
-    pr = contact.pairs(U.ravel())
-    assert len(pr.gap_mm) > 0 and contact.searches == searches
-    np.testing.assert_allclose(pr.gap_mm, -0.001, rtol=1e-9)
-    assert not contact.refresh(U.ravel(), tol=1e-9)  # pushed straight in: same pairing
-    U[rnodes, 1] = 0.6 * facet_size(4)  # slid along the surface: other master facets
-    assert contact.refresh(U.ravel(), tol=1e-9)
-    assert not contact.refresh(U.ravel(), tol=1e-9)  # now consistent with its own pairing
-    contact.unfreeze()
-    assert not contact.frozen and contact.refresh(U.ravel(), tol=1e-9) is False
-
-
-# -- edge fade ----------------------------------------------------------------------------------
-
-
-def test_barycentric_derivatives_match_finite_differences() -> None:
-    rng = np.random.default_rng(11)
-    xs, x1, x2, x3 = random_triangles(rng, 40)
-    lam, dlam = barycentric_derivatives(xs, x1, x2, x3)
-    np.testing.assert_allclose(lam.sum(axis=1), 1.0, atol=1e-12)
-    # The projection sum lam_i x_i differs from xs only along the normal.
-    proj = lam[:, 0:1] * x1 + lam[:, 1:2] * x2 + lam[:, 2:3] * x3
-    n = np.cross(x2 - x1, x3 - x1)
-    np.testing.assert_allclose(np.cross(xs - proj, n), 0.0, atol=1e-10)
-    q = np.concatenate([xs, x1, x2, x3], axis=1)
-    h = 1e-6
-    for j in range(12):
-        e = np.zeros(12)
-        e[j] = h
-        qp, qm = q + e, q - e
-        lp = barycentric_derivatives(qp[:, 0:3], qp[:, 3:6], qp[:, 6:9], qp[:, 9:12])[0]
-        lm = barycentric_derivatives(qm[:, 0:3], qm[:, 3:6], qm[:, 6:9], qm[:, 9:12])[0]
-        np.testing.assert_allclose((lp - lm) / (2 * h), dlam[:, :, j], atol=1e-7)
-
-
-def test_fade_weight_values_and_derivatives() -> None:
-    width = 0.25
-    lam = np.array([[0.2, 0.5, 0.3], [-0.125, 0.6, 0.525], [-0.3, 0.5, 0.8], [-0.05, -0.1, 1.15]])
-    w, dw, d2w = fade_weight(lam, width)
-    # s(lam) = 1 - 3 t^2 + 2 t^3, t = -lam / width: t = 1/2 gives 1/2; t >= 1 gives 0.
-    np.testing.assert_allclose(w[:3], [1.0, 0.5, 0.0])
-    s = lambda t: 1 - 3 * t**2 + 2 * t**3  # noqa: E731
-    np.testing.assert_allclose(w[3], s(0.2) * s(0.4))
-    h = 1e-6
-    for j in range(3):
-        e = np.zeros(3)
-        e[j] = h
-        wp, dwp, _ = fade_weight(lam + e, width)
-        wm, dwm, _ = fade_weight(lam - e, width)
-        np.testing.assert_allclose((wp - wm) / (2 * h), dw[:, j], atol=1e-7)
-        np.testing.assert_allclose((dwp - dwm) / (2 * h), d2w[:, :, j], atol=1e-5)
-
-
-def slid(X: np.ndarray, right_nodes: np.ndarray, dy: float) -> np.ndarray:
-    """Flat displacement: the right surface pushed 1e-3 into the left (-x) and slid by dy."""
-    U = np.zeros_like(X)
-    U[right_nodes, 0] = -1e-3
-    U[right_nodes, 1] = dy
-    return U.ravel()
-
-
-def _slide_forces(steps: int, fade_width: float = 0.25) -> np.ndarray:
-    """x-force on the right square (3 x 3 facets, pushed 1e-3 into the left 4 x 4 one) while it
-    slides by 0.3 along y, so that left contact points cross its boundary edge at y = 1."""
-    X, left, right, rnodes = two_squares(4, 3)
-    contact = make_contact(X, left, right, fade_width=fade_width)
-    out = []
-    for dy in np.linspace(0.0, 0.3, steps):
-        out.append(contact.force_vector(slid(X, rnodes, dy)).reshape(-1, 3)[rnodes, 0].sum())
-    return np.array(out)
-
-
-def test_force_fades_continuously_off_a_boundary_edge() -> None:
-    """Without the fade a contact point leaving the other surface over its edge drops its
-    whole force at once, and the largest jump between slide steps stays when the step is
-    halved (checked: fade_width 1e-9 gives a ratio of ~1). With it the force is Lipschitz in
-    the slide: halving the step halves the largest jump."""
-    coarse, fine = np.abs(_slide_forces(61)), np.abs(_slide_forces(121))
-    jump_c, jump_f = np.abs(np.diff(coarse)).max(), np.abs(np.diff(fine)).max()
-    assert coarse[-1] < 0.8 * coarse[0]  # the overlap area shrinks: points did leave
-    assert jump_f / jump_c < 0.6
-
-
-# -- pairing 2-cycles ---------------------------------------------------------------------------
-
-
-def _masters(found) -> dict[int, list[tuple[int, float]]]:
-    """Contact point id -> [(master facet id, carried area)] of one search."""
-    out: dict[int, list[tuple[int, float]]] = {}
-    for p, m, a in zip(found.pid, found.mkey, found.area_mm2, strict=True):
-        out.setdefault(int(p), []).append((int(m), float(a)))
-    return out
-
-
-@pytest.mark.parametrize("share", [True, False])
-def test_a_master_that_flips_back_is_shared_half_and_half(squares, share: bool) -> None:
-    """A point whose master goes A -> B -> A over successive searches keeps both A and B with
-    half its area each (so its force is the mean of the two facets' forces) while the search
-    gives it A or B; a point that moves on to a third facet has one master again."""
-    X, left, right, rnodes = squares
-    contact = make_contact(X, left, right, share_cycles=share)
-    h = facet_size(4)
-
-    def state(dy: float) -> np.ndarray:
-        return slid(X, rnodes, dy)
-
-    contact.freeze(state(0.0))
-    first = _masters(contact._found)
-    contact.refresh(state(0.4 * h), tol=0.0)
-    second = _masters(contact._found)
-    flipped = {p for p in first if p in second and first[p][0][0] != second[p][0][0]}
-    assert len(flipped) > 10  # a slide of 0.4 h moves many points onto other facets
-    contact.refresh(state(0.0), tol=0.0)
-    third = _masters(contact._found)
-    assert third.keys() == first.keys()
-    # Sharing needs B to be valid for the point back at the first state: its projection on
-    # B's plane (all facets lie in x = 0) at most fade_width past B's edges.
-    x = X + state(0.0).reshape(-1, 3)
-    pts = np.vstack([np.einsum("qi,qij->qj", p.bary, x[p.carrier]) for p in contact.points])
-    facets = np.vstack([srf.facets for srf in contact.surfaces])
-
-    def margin(p: int, f: int) -> float:
-        a, b, c = x[facets[f]][:, 1:]
-        lam = np.linalg.solve(np.c_[b - a, c - a], pts[p, 1:] - a)
-        return float(min(1 - lam.sum(), *lam) + contact.fade_width)
-
-    margins = {p: margin(p, second[p][0][0]) for p in flipped}
-    shared = {p for p in flipped if margins[p] > 1e-9}
-    assert len(shared) > 10
-    for p, entries in third.items():
-        if p in flipped and abs(margins[p]) <= 1e-9:
-            continue  # on the edge of the fade band: either way
-        if share and p in shared:
-            a = first[p][0][1]
-            assert sorted(entries) == sorted([(first[p][0][0], a / 2), (second[p][0][0], a / 2)])
-        else:
-            assert entries == first[p]
-    # Shared points stay shared at a state where the search gives them A or B ...
-    contact.refresh(state(0.4 * h), tol=0.0)
-    fourth = _masters(contact._found)
-    two = {p for p, e in fourth.items() if len(e) == 2}
-    if share:
-        assert len(two) > 10 and two <= flipped
-        assert all({m for m, _ in fourth[p]} == {first[p][0][0], second[p][0][0]} for p in two)
-    else:
-        assert not two
-    # ... and have one master again once the search gives them a third facet.
-    contact.refresh(state(-0.8 * h), tol=0.0)
-    fifth = _masters(contact._found)
-    moved = {p for p in two if p in fifth and fifth[p][0][0] not in
-             (first[p][0][0], second[p][0][0])}  # fmt: skip
-    assert (bool(moved) == share) and all(len(fifth[p]) == 1 for p in moved)
-
-
-def test_a_retry_from_the_accepted_state_gets_its_pairing_back(squares) -> None:
-    """`freeze` at the state of the last accepted `refresh` (a converged state, where a retried
-    load increment starts) restores that pairing, shared points included, even after the
-    pairing history moved on; elsewhere it searches."""
-    X, left, right, rnodes = squares
-    contact = make_contact(X, left, right)
-    h = facet_size(4)
-
-    def state(dy: float) -> np.ndarray:
-        return slid(X, rnodes, dy)
-
-    contact.freeze(state(0.0))
-    contact.refresh(state(0.4 * h), tol=0.0)
-    contact.refresh(state(0.0), tol=0.0)  # the flips back are shared now
-    assert not contact.refresh(state(0.0), tol=0.0)  # same state, same pairing: accepted
-    accepted = _masters(contact._found)
-    assert sum(len(e) == 2 for e in accepted.values()) > 10
-    f_accepted = contact.force_vector(state(0.0))
-    contact.refresh(state(-0.8 * h), tol=0.0)  # a failed attempt wandered off ...
-    contact.freeze(state(0.0))  # ... and the increment is retried from the accepted state
-    assert _masters(contact._found) == accepted
-    np.testing.assert_array_equal(contact.force_vector(state(0.0)), f_accepted)
-    contact.freeze(state(0.1 * h))
-    assert _masters(contact._found) != accepted

@@ -10,7 +10,8 @@ F = diag(lx, lt, lt), P_xx = -p, P_yy = P_zz = 0 (P1 represents it exactly), and
 
 - the total contact force is the applied load p A (A = 1 mm^2): global equilibrium of R;
 - the overlap d is uniform with p = k_V d / h (woundsweep.contact: pressure per reference
-  area k_V (-g) / h_s, half of it carried by each pass), h the size of a contact facet, so
+  area k_V (-g) / h, half of it carried by each pass; the lumped nodal areas are the
+  consistent loads of a uniform pressure on P1 facets), h the size of a contact facet, so
   d = p h / k_V shrinks like 1 / k_V across the stages' k_V = 1, 5, 100 GPa.
 
 Material: the paper's normal dermis (Fung, stiff axis along x); p = 10 kPa compresses both
@@ -122,8 +123,7 @@ class Blocks:
         # Contact: the two x = 0 faces in node numbering, oriented out of their blocks.
         left = orient_outward(X, self.cell_nodes, input_node[left_wall])
         right = orient_outward(X, self.cell_nodes, input_node[right_wall])
-        depth = 0.5 / max(n, m)
-        self.contact = FlankContact(X, left, right, max_depth_mm=depth)
+        self.contact = FlankContact(X, left, right)
 
     # -- NonlinearProblem ---------------------------------------------------------------------
 
@@ -144,9 +144,6 @@ class Blocks:
 
     def energy(self) -> float | None:
         return None  # the dead load's work is not in a form: no potential to merit
-
-    def refresh(self, tol: float) -> bool:
-        return False  # the pairing is live (never frozen)
 
     def _grad(self, w: np.ndarray) -> np.ndarray:
         W = w.reshape(-1, 3)[self.cell_nodes]
@@ -185,10 +182,9 @@ def solve_blocks(n_right: int) -> dict[str, Any]:
     prob = Blocks(N_BOX, material, PRESSURE_KPA, n_right=n_right)
     t_build = time.perf_counter() - t0
     u = prob.u.x.array
-    # The start: the faces touch (g = 0 < touch_rel h), so every contact point is engaged and
-    # R's rigid motion in x is restrained from the first Newton step on.
+    # The start: the faces touch (g = 0 at every contact point).
     prob.contact.k_V_kPa = K_V_GPA[0] * GPA_TO_KPA
-    start = prob.contact.pairs(u)
+    start = prob.contact.gaps(u)
     newton = NewtonSolver(prob, prob.A, NewtonSettings())
     zeros = np.zeros(len(prob.rows))
     scale = float(np.linalg.norm(prob.f_ext))
@@ -217,7 +213,7 @@ def solve_blocks(n_right: int) -> dict[str, Any]:
               f"{run.time_s:.2f} s; force {s.contact_force_mN:.9f} mN, reaction "
               f"{run.reaction_x_mN:.9f} mN, max penetration {s.max_penetration_mm:.4e} mm "
               f"({s.n_penetrating} points)")  # fmt: skip
-    return {"prob": prob, "start": start, "runs": runs}
+    return {"prob": prob, "start": start, "runs": runs, "n_right": n_right}
 
 
 @pytest.fixture(scope="module", autouse=True)
@@ -236,11 +232,11 @@ def matching() -> dict[str, Any]:
     return solve_blocks(N_BOX)
 
 
-def test_touching_start_engages_every_contact_point(solved) -> None:
-    prob, start = solved["prob"], solved["start"]
-    n_facets = sum(len(srf.facets) for srf in prob.contact.surfaces)
-    assert len(start.gap_mm) == 6 * n_facets
-    np.testing.assert_allclose(start.gap_mm, 0.0, atol=1e-15)
+def test_touching_start_has_zero_gap_at_every_contact_point(solved) -> None:
+    """Every node of both faces is a contact point and sees the other face at gap 0."""
+    start = solved["start"]
+    assert len(start) == (N_BOX + 1) ** 2 + (solved["n_right"] + 1) ** 2
+    np.testing.assert_allclose(start, 0.0, atol=1e-14)
 
 
 @pytest.mark.parametrize("k_gpa", K_V_GPA)
@@ -251,7 +247,6 @@ def test_contact_force_balances_the_load(solved, k_gpa: float) -> None:
     s = run.summary
     assert abs(s.contact_force_mN - load) / load < 0.01
     assert s.max_penetration_mm > 0
-    assert s.n_deep == 0
     # The load goes on through L to its support: the reaction there is the load, too.
     assert abs(abs(run.reaction_x_mN) - load) / load < 0.01
 
@@ -265,24 +260,36 @@ def test_penetration_shrinks_like_one_over_k_V(solved) -> None:
 
 @pytest.mark.parametrize("k_gpa", K_V_GPA)
 def test_matching_faces_penetration_is_p_h_over_k_V(matching, k_gpa: float) -> None:
-    """Matching faces: uniform overlap d = p h / k_V, h the equilateral side of a contact
-    facet's area, at every contact point of both passes."""
-    s = matching["runs"][k_gpa].summary
+    """Matching faces: overlap d = p h / k_V, h the equilateral side of a contact facet's
+    area, at the nodes off the faces' edges (within 1 %); the implicit surface spreads a
+    point's reaction over the master facets in its kernel, which on the faces' edges and
+    corners, where the kernel is cut off, moves the nodal pressure by up to 30 %."""
+    prob = matching["prob"]
+    run = matching["runs"][k_gpa]
+    c = prob.contact
+    c.k_V_kPa = k_gpa * GPA_TO_KPA
+    depth = -c.gaps(run.u)
     h = float(np.sqrt(4.0 * (0.5 / N_BOX**2) / np.sqrt(3.0)))
     expected = PRESSURE_KPA * h / (k_gpa * GPA_TO_KPA)
-    assert s.max_penetration_mm == pytest.approx(expected, rel=0.01)
-    assert s.max_penetration_rel == pytest.approx(expected / h, rel=0.01)
-    assert s.n_penetrating == 2 * 6 * 2 * N_BOX**2  # 2 passes, 6 points, 2 n^2 facets
+    nodes = np.concatenate([ps.nodes for ps in c.passes])
+    yz = prob.X[nodes, 1:]
+    inside = np.all((yz > 1e-9) & (yz < 1.0 - 1e-9), axis=1)
+    assert inside.sum() == 2 * (N_BOX - 1) ** 2
+    np.testing.assert_allclose(depth[inside], expected, rtol=0.01)
+    np.testing.assert_allclose(depth, expected, rtol=0.3)
+    assert run.summary.n_penetrating == 2 * (N_BOX + 1) ** 2  # every node of both faces
 
 
 def test_matching_faces_solution_is_the_homogeneous_uniaxial_state(matching) -> None:
     """u = ((l_x - 1)(X + 1), (l_t - 1) Y, (l_t - 1) Z) in L; R the same, shifted by -d in x
-    (its face x = 0 sits d behind L's), which P1 represents exactly."""
+    (its face x = 0 sits d behind L's), which P1 represents exactly: up to the overlap's
+    variation over the face (the test above), i.e. within the overlap d itself."""
     prob = matching["prob"]
     lx, lt = uniaxial_state(Fung.normal(0.0), PRESSURE_KPA)
     X = prob.X
     for k, run in matching["runs"].items():
         exact = np.c_[(lx - 1.0) * (X[:, 0] + 1.0), (lt - 1.0) * X[:, 1], (lt - 1.0) * X[:, 2]]
-        exact[prob.in_right, 0] -= run.summary.max_penetration_mm
+        d = PRESSURE_KPA * float(np.sqrt(4.0 * (0.5 / N_BOX**2) / np.sqrt(3.0))) / (k * GPA_TO_KPA)
+        exact[prob.in_right, 0] -= d
         err = np.abs(run.u.reshape(-1, 3) - exact).max()
-        assert err < 1e-7, (k, err)
+        assert err < d, (k, err, d)

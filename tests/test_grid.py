@@ -146,7 +146,7 @@ def test_settings_defaults_are_table_2() -> None:
     assert stiff["c_kPa"] == 42.6 and stiff["tsf"] == 1.05 and stiff["mu_kPa"] == [35.6, 11.8, 11.8]
     assert s.materials["subcutis"] == {"C10_kPa": 0.4, "C20_kPa": 1.4, "K_kPa": 50.0}
     assert s.stages["contact_penalty_GPa"] == [1.0, 5.0, 100.0]
-    assert s.stages["contact_model"] == "surface"
+    assert s.stages["contact_model"] == "smooth"
     # The paper file spells out the same values as the defaults.
     assert load_sweep(PAPER).materials == s.materials
     assert load_sweep(PAPER).stages == s.stages
@@ -154,26 +154,21 @@ def test_settings_defaults_are_table_2() -> None:
 
 def test_contact_model_setting() -> None:
     data = yaml.safe_load(Path(DEMO).read_text())
-    assert parse_sweep(data).stages["contact_model"] == "surface"
-    data["stages"] = {"contact_model": "surface"}
-    assert parse_sweep(data).stages["contact_model"] == "surface"
-    data["stages"] = {"contact_model": "depth"}
-    with pytest.raises(SweepError) as err:
-        parse_sweep(data)
-    assert str(err.value).endswith(
-        "stages.contact_model: 'depth' was removed; the only contact model is 'surface'"
-    )
-    assert "\n" not in str(err.value)
+    assert parse_sweep(data).stages["contact_model"] == "smooth"
+    data["stages"] = {"contact_model": "smooth"}
+    assert parse_sweep(data).stages["contact_model"] == "smooth"
+    for gone in ("depth", "surface"):
+        data["stages"] = {"contact_model": gone}
+        with pytest.raises(SweepError) as err:
+            parse_sweep(data)
+        assert str(err.value).endswith(
+            f"stages.contact_model: '{gone}' was removed; the only contact model is 'smooth'"
+            " (docs/model.md, 'Contact')"
+        )
+        assert "\n" not in str(err.value)
     data["stages"] = {"contact_model": 3}
     with pytest.raises(SweepError, match="stages.contact_model"):
         parse_sweep(data)
-
-
-def test_closure_load_setting() -> None:
-    data = yaml.safe_load(Path(DEMO).read_text())
-    assert parse_sweep(data).stages["closure_load"] == "dead"
-    data["stages"] = {"closure_load": "follower"}
-    assert parse_sweep(data).stages["closure_load"] == "follower"
-    data["stages"] = {"closure_load": "pressure"}
-    with pytest.raises(SweepError, match="stages.closure_load"):
+    data["stages"] = {"closure_load": "dead"}  # removed: an unknown key now
+    with pytest.raises(SweepError, match="closure_load"):
         parse_sweep(data)

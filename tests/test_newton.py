@@ -119,9 +119,6 @@ class _DoubleWell:
         u = self.u
         return float(np.sum((u**2 - 1) ** 2) / 4 + self.c * (u[0] - u[1]) ** 2 / 2)
 
-    def refresh(self, tol: float) -> bool:
-        return False
-
     def min_det(self, u: np.ndarray) -> float:
         return 1.0
 
@@ -169,3 +166,61 @@ def test_energy_merit_leaves_an_unstable_equilibrium(energy_merit: bool) -> None
         assert all(b <= a + 1e-15 for a, b in zip([e_start, *energies], energies))
     else:
         np.testing.assert_allclose(p.u, [0.0, 0.0], atol=1e-8)
+
+
+class _Arctan(_DoubleWell):
+    """R(u) = atan(u) componentwise, E = sum u atan(u) - log(1 + u^2) / 2: from |u| > 1.39
+    the full Newton step overshoots, so the first updates are damped."""
+
+    def _grad(self) -> np.ndarray:
+        return np.arctan(self.u)
+
+    def jacobian(self, A: Any) -> None:
+        A.zeroEntries()
+        A.setValues([0, 1], [0, 1], np.diag(1.0 / (1.0 + self.u**2)).ravel())
+        A.assemble()
+
+    def energy(self) -> float:
+        u = self.u
+        return float(np.sum(u * np.arctan(u) - 0.5 * np.log1p(u**2)))
+
+
+@pytest.mark.fem
+def test_convergence_is_judged_after_a_full_newton_step() -> None:
+    """A loose tolerance that a damped update already meets: Newton must still take a full,
+    undamped step from there and stop only if that step meets the tolerances; the state it
+    returns is then one that a full step changes by less than stol."""
+    from petsc4py import PETSc
+
+    from woundsweep.solver.newton import NewtonSolver, Policy
+
+    p = _Arctan([3.0, -2.0])
+    A = PETSc.Mat().createAIJ([2, 2], nnz=2)
+    A.setUp()
+    A.setValues([0, 1], [0, 1], np.ones(4))
+    A.assemble()
+    st = NewtonSettings(rtol=0.0, atol=0.5, stol=0.5)  # met long before the root
+    newton = NewtonSolver(p, A, st)
+    steps: list[tuple[float, np.ndarray]] = []  # (gamma of the update, residual after it)
+    real = newton._relax
+
+    def relax(*args: Any) -> Any:
+        out = real(*args)
+        steps.append((out.gamma, p._grad().copy()))
+        return out
+
+    newton._relax = relax  # type: ignore[method-assign]
+    res = newton.solve(np.zeros(0, dtype=np.int32), np.zeros(0), policy=Policy(st, True))
+    assert res.status == CONVERGED
+    damped = [i for i, (g, r) in enumerate(steps) if g < 1.0]
+    assert damped, "the start must need damped steps"
+    # A damped update met the tolerance (|R| <= atol) and was not accepted as converged...
+    first_ok = next(i for i, (g, r) in enumerate(steps) if np.linalg.norm(r) <= st.atol)
+    assert steps[first_ok][0] < 1.0
+    # ... a full step followed it (the convergence check's, not a relaxed one: one more
+    # iteration than the relaxed updates), and its result is the returned state.
+    assert res.iterations == len(steps) + 1
+    r = np.arctan(p.u)
+    assert np.linalg.norm(r) <= st.atol
+    du = -r * (1.0 + p.u**2)  # the full step from the returned state
+    assert np.abs(du).max() <= st.stol

@@ -416,7 +416,7 @@ def test_fingerprint_covers_what_determines_a_result(run_dir: Path) -> None:
         fp("materials", {"skin_types": {"stiff": {"mu_kPa": [35.6, 11.8, 11.9]}, "soft": {}}}),
         fp("materials", {"skin_types": {"stiff": {"tsf": 1.06}, "soft": {}}}),
         fp("materials", {"subcutis": {"K_kPa": 51}}),
-        fp("stages", {"closure_load": "follower"}),
+        fp("stages", {"closure_zone": {"depth_fraction": 0.4}}),
         fp("stages", {"contact_penalty_GPa": [1, 5, 50]}),
         fp("stages", {"closure_zone": {"y_fraction": 0.5}}),
         fp("solver", {"quadrature_degree": 2}),

@@ -119,6 +119,4 @@ def pair_terms(
         out += W[:, None, None] * d2f
         return np.einsum("ai,pab,bj->pij", V_TO_Q, out, V_TO_Q)
 
-    return PairTerms(
-        W * tri, W * m, dN, dD, second(tri, dtri, d2tri), second(m, dm, d2m)
-    )
+    return PairTerms(W * tri, W * m, dN, dD, second(tri, dtri, d2tri), second(m, dm, d2m))

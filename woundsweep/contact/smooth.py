@@ -14,7 +14,8 @@ Formulation (docs/model.md, "Contact"):
   and master once: the pressure per reference area is k_V (-g) / h, so k_V has stress units
   and the penetration at pressure p is p h / k_V.
 - Linearisation. Exact: residual c g dg and tangent c (dg dg^T + g d2g) of every point with
-  g < 0, c = w k_V A / h, with the derivatives of the quotient phi = N / D.
+  g <= 0, c = w k_V A / h, with the derivatives of the quotient phi = N / D (at g = 0 the
+  tangent of the penetrating side: touching flanks are held from the first Newton step).
 
 A point sees the master facets whose centroid lies within their kernel radius (a KD-tree
 query at every new state, cheap: the kernel vanishes with two derivatives at its radius, so
@@ -38,6 +39,22 @@ __all__ = ["TWO_PASS_WEIGHT", "FlankContact"]
 TWO_PASS_WEIGHT = 0.5  # each flank is slave once and master once
 
 
+# The support step: s(t) = 0 for t <= T0, 1 for t >= T1, C2 (quintic smoothstep) between.
+# t = D / D_full, D_full = pi rho^2 / 4 the kernel's integral over a plane: 1/4 at a corner
+# of a flat surface, 1/2 on an edge, so only points past the master's boundary fade.
+SUPPORT_T0, SUPPORT_T1 = 0.005, 0.05
+
+
+def support_step(t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """s(t) and its first two derivatives (see ``SUPPORT_T0``, ``SUPPORT_T1``)."""
+    w = SUPPORT_T1 - SUPPORT_T0
+    x = np.clip((t - SUPPORT_T0) / w, 0.0, 1.0)
+    s = x**3 * (10.0 - 15.0 * x + 6.0 * x**2)
+    s1 = 30.0 * x**2 * (1.0 - x) ** 2 / w
+    s2 = 60.0 * x * (1.0 - x) * (1.0 - 2.0 * x) / w**2
+    return s, s1, s2
+
+
 class _Pass(NamedTuple):
     """One pass: the slave flank's contact points against the master flank's facets."""
 
@@ -46,19 +63,21 @@ class _Pass(NamedTuple):
     size_mm: np.ndarray  # (nq,) h per point
     facets: np.ndarray  # (nf, 3) master facets, outward
     rho_mm: np.ndarray  # (nf,) kernel radius per master facet
+    support_mm2: np.ndarray  # (nq,) D_full of each point: pi rho^2 / 4 at its own size
 
 
 class _State(NamedTuple):
     """Gaps and derivatives of the engaged points at one state (both passes)."""
 
     gap_all: np.ndarray  # (nq_total,) gap of every point (+inf where no master is near)
-    weight_all: np.ndarray  # (nq_total,) w A / h per point, mm (c = k_V w A / h)
+    weight_all: np.ndarray  # (nq_total,) s^2 w A / h per point, mm (c = k_V w A / h)
     size_all: np.ndarray  # (nq_total,)
-    gap: np.ndarray  # (na,) engaged points (g < 0)
+    full_weight: np.ndarray  # (nq_total,) w A / h: weight_all where the support step is 1
+    gap: np.ndarray  # (na,) psi = s g of the engaged points (g <= 0; s the support step)
     weight: np.ndarray  # (na,)
     dofs: np.ndarray  # (na, L) local dofs (padded with 0)
-    grad: np.ndarray  # (na, L) dg in local dofs (0 in padding)
-    hess: np.ndarray | None  # (na, L, L) d2g
+    grad: np.ndarray  # (na, L) dpsi in local dofs (0 in padding)
+    hess: np.ndarray | None  # (na, L, L) d2psi
 
 
 def _lumped(X: np.ndarray, facets: np.ndarray, nodes: np.ndarray) -> np.ndarray:
@@ -78,12 +97,12 @@ class FlankContact:
     """
 
     def __init__(
-        self, X: np.ndarray, left: np.ndarray, right: np.ndarray, *, radius_factor: float = float(__import__("os").environ.get("WS_RHO", 1.5))
+        self, X: np.ndarray, left: np.ndarray, right: np.ndarray, *, radius_factor: float = 1.5
     ) -> None:
         self.X = np.asarray(X, dtype=float)
         self.n_dofs = 3 * len(self.X)
         sides = (np.asarray(left, dtype=np.int64), np.asarray(right, dtype=np.int64))
-        surfs = tuple(surface(self.X, f) for f in sides)
+        self.surfaces = surfs = tuple(surface(self.X, f) for f in sides)
         shared = np.intersect1d(surfs[0].nodes, surfs[1].nodes)
         passes = []
         for i in (0, 1):
@@ -92,9 +111,10 @@ class FlankContact:
             p = self.X[ms.facets]
             m_area = 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
             rho = radius_factor * np.sqrt(4.0 * m_area / np.sqrt(3.0))
+            size = sl.size_mm[keep]
             passes.append(
-                _Pass(sl.nodes[keep], _lumped(self.X, sl.facets, sl.nodes[keep]),
-                      sl.size_mm[keep], ms.facets, rho)
+                _Pass(sl.nodes[keep], _lumped(self.X, sl.facets, sl.nodes[keep]), size,
+                      ms.facets, rho, np.pi * (radius_factor * size) ** 2 / 4.0)
             )  # fmt: skip
         self.passes = tuple(passes)
         self.nodes = np.union1d(surfs[0].nodes, surfs[1].nodes)  # every node whose position matters
@@ -135,14 +155,21 @@ class FlankContact:
         gap = np.full(nq, np.inf)
         seen = D > 0.0
         gap[seen] = N[seen] / D[seen]
-        act_pt = np.flatnonzero(gap < 0.0)
+        # g = 0 counts as engaged: the tangent is then that of the penetrating side, so
+        # touching surfaces hold each other from the first Newton step on.
+        # Where the master surface ends (its kernel support D thins out) the point's force
+        # fades with it: the gap enters the energy as psi = s(D / D_full) g, s a C2 step.
+        t_sup = np.zeros(nq)
+        t_sup[seen] = D[seen] / ps.support_mm2[seen]
+        s_w, s_1, s_2 = support_step(t_sup)
+        act_pt = np.flatnonzero((gap <= 0.0) & (s_w > 0.0))
         keep = np.isin(q, act_pt)
         q, mf = q[keep], mf[keep]
         t = type(t)(*(None if a is None else a[keep] for a in t))
-        # Local node numbering per engaged point: slot 0 is the point's own node.
         rank = np.full(nq, -1, dtype=np.int64)
         rank[act_pt] = np.arange(len(act_pt))
         qa = rank[q]
+        # Local node numbering per engaged point (its own node and its masters' nodes).
         pair_nodes = np.concatenate([ps.nodes[q][:, None], mf], axis=1)  # (P, 4)
         key = qa[:, None] * len(x) + pair_nodes
         own = rank[act_pt] * len(x) + ps.nodes[act_pt]
@@ -151,33 +178,49 @@ class FlankContact:
         first = np.searchsorted(pt_of, np.arange(len(act_pt)))
         slot = np.arange(len(uniq)) - first[pt_of]
         L = int(slot.max()) + 1 if len(uniq) else 1
-        loc = slot[inv[len(own):]].reshape(-1, 4)  # local slot of each pair node
+        loc = slot[inv[len(own) :]].reshape(-1, 4)  # local slot of each pair node
         node_of = np.zeros((len(act_pt), L), dtype=np.int64)
         node_of[pt_of, slot] = uniq % len(x)
         na = len(act_pt)
-        g = gap[act_pt]
-        Dq = D[act_pt]
-        # dg = (dN - g dD) / D, gathered into local dofs (slot * 3 + component).
+        g, Dq, Dfull = gap[act_pt], D[act_pt], ps.support_mm2[act_pt]
+        sw, s1, s2 = s_w[act_pt], s_1[act_pt], s_2[act_pt]
         ldof = (3 * loc[:, :, None] + np.arange(3)).reshape(-1, 12)
         rows = np.repeat(qa, 12)
-        dphi = (t.dN - g[qa, None] * t.dD) / Dq[qa, None]
-        grad = np.zeros((na, 3 * L))
-        np.add.at(grad, (rows, ldof.ravel()), dphi.ravel())
+
+        def gather(v: np.ndarray) -> np.ndarray:
+            out = np.zeros((na, 3 * L))
+            np.add.at(out, (rows, ldof.ravel()), v.ravel())
+            return out
+
+        dphi = gather((t.dN - g[qa, None] * t.dD) / Dq[qa, None])  # dg = (dN - g dD) / D
+        dt = gather(t.dD) / Dfull[:, None]  # d(D / D_full)
+        psi = sw * g
+        grad = sw[:, None] * dphi + (s1 * g)[:, None] * dt
         hess = None
         if hessian:
-            dD = np.zeros((na, 3 * L))
-            np.add.at(dD, (rows, ldof.ravel()), t.dD.ravel())
-            dD /= Dq[:, None]
-            hess = np.zeros((na, 3 * L, 3 * L))
-            loc_h = (t.d2N - g[qa, None, None] * t.d2D) / Dq[qa, None, None]
             r_i = np.repeat(ldof, 12, axis=1).ravel()
             c_i = np.tile(ldof, (1, 12)).ravel()
-            np.add.at(hess, (np.repeat(qa, 144), r_i, c_i), loc_h.ravel())
-            outer = grad[:, :, None] * dD[:, None, :]
-            hess -= outer + np.transpose(outer, (0, 2, 1))
+            p_i = np.repeat(qa, 144)
+
+            def gather2(v: np.ndarray) -> np.ndarray:
+                out = np.zeros((na, 3 * L, 3 * L))
+                np.add.at(out, (p_i, r_i, c_i), v.ravel())
+                return out
+
+            dD = dt * (Dfull / Dq)[:, None]
+            d2phi = gather2((t.d2N - g[qa, None, None] * t.d2D) / Dq[qa, None, None])
+            outer = dphi[:, :, None] * dD[:, None, :]
+            d2phi -= outer + np.transpose(outer, (0, 2, 1))
+            d2t = gather2(t.d2D) / Dfull[:, None, None]
+            cross = dphi[:, :, None] * dt[:, None, :]
+            hess = sw[:, None, None] * d2phi
+            hess += s1[:, None, None] * (cross + np.transpose(cross, (0, 2, 1)))
+            hess += g[:, None, None] * (
+                s2[:, None, None] * dt[:, :, None] * dt[:, None, :] + s1[:, None, None] * d2t
+            )
         dofs = (3 * node_of[:, :, None] + np.arange(3)).reshape(na, 3 * L)
         weight = TWO_PASS_WEIGHT * ps.area_mm2 / ps.size_mm
-        return gap, weight, g, weight[act_pt], dofs, grad, hess
+        return gap, weight * s_w**2, psi, weight[act_pt], dofs, grad, hess
 
     def _state(self, u: np.ndarray, hessian: bool) -> _State:
         """Gaps and derivatives at ``u`` (cached by the flank node positions; a state with the
@@ -202,6 +245,7 @@ class FlankContact:
             np.concatenate([p[0] for p in parts]),
             np.concatenate([p[1] for p in parts]),
             np.concatenate([ps.size_mm for ps in self.passes]),
+            np.concatenate([TWO_PASS_WEIGHT * ps.area_mm2 / ps.size_mm for ps in self.passes]),
             np.concatenate([p[2] for p in parts]),
             np.concatenate([p[3] for p in parts]),
             np.concatenate([pad(p[4], False) for p in parts]),
@@ -276,13 +320,19 @@ class FlankContact:
 
     # -- reporting ------------------------------------------------------------------------------
 
+    def gaps(self, u: np.ndarray) -> np.ndarray:
+        """The gap (mm) of every contact point at ``u``, both passes (+inf: no master near)."""
+        return self._state(u, hessian=False).gap_all.copy()
+
     def summary(self, u: np.ndarray) -> ContactSummary:
         """Penetration and compressive normal force of the state ``u`` at the current
-        ``k_V_kPa``, over every contact point."""
+        ``k_V_kPa``: force sum c s^2 (-g) over every contact point (s the support step),
+        penetration over the points the master's surface fully supports (s = 1)."""
         st = self._state(u, hessian=False)
         depth = np.maximum(-st.gap_all, 0.0)
         depth[~np.isfinite(depth)] = 0.0
         force = float(self.k_V_kPa * np.sum(st.weight_all * depth))
+        depth[st.weight_all < st.full_weight] = 0.0
         pen = depth > 0.0
         if not pen.any():
             return ContactSummary(0, 0.0, 0.0, force)

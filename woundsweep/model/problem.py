@@ -20,9 +20,7 @@ __all__ = ["WoundProblem"]
 
 
 class WoundProblem:
-    """Residual R(u), tangent dR/du and potential of the wound model at the state ``forms.u``.
-
-    """
+    """Residual R(u), tangent dR/du and potential of the wound model at the state ``forms.u``."""
 
     def __init__(
         self,

@@ -1,7 +1,6 @@
 """Stability of an equilibrium: the eigenvalues nearest zero of the symmetric part of the tangent.
 
-A contact stage that fails either stalls at a stable state (the residual is only piecewise
-smooth: Newton cycles between pairings) or follows an equilibrium path that has lost
+A contact stage that fails either stalls at a stable state or follows an equilibrium path that has lost
 stability and turns back in the penalty (a limit point: an eigenvalue of the tangent passes
 through zero, and no equilibrium is near at a larger penalty). The wound model records, for a
 failed contact stage, the lowest of the eigenvalues nearest zero at the last converged state,
@@ -10,8 +9,7 @@ so the two kinds of failure can be told apart (docs/model.md, "Known limits").
 The tangent is restricted to the free dofs (the Dirichlet rows and columns dropped) and
 symmetrised, (K + K^T) / 2. For a conservative problem that is the second variation of the
 energy, which decides stability; the contact stages are conservative, their closure traction
-a dead load (with ``closure_load: follower`` the tangent holds the traction's area state
-fixed, so its load stiffness is left out). Eigenvalues are in the tangent's units, mN/mm.
+a dead load. Eigenvalues are in the tangent's units, mN/mm.
 They are found by shift-invert Lanczos (scipy ``eigsh``) around a shift just below zero, so
 the ones nearest zero come first, from either side.
 """

@@ -1,16 +1,15 @@
-"""Cost of one contact search against one residual assembly (woundsweep.contact).
+"""Cost of the contact terms against the finite-element assembly (woundsweep.contact).
 
 Usage::
 
-    python benchmarks/bench_contact_search.py     # about a minute
+    python benchmarks/bench_contact.py     # about a minute
 
 Solves stages 1-4 of the solver benchmark's mid-size paper wedge (soft skin, 90 degrees), then
-times, at the converged stage-4 state, a full pair search of both passes (forced: the cache is
-dropped before each), one contact evaluation of a frozen pairing (gaps, fades, forces), and
-one assembly of the finite-element residual. Prints the contact points, the candidates found
-and the ratio search / residual: the contact stages search once per load increment and once
-per refresh, so this ratio and the number of searches set the detection share of a stage
-(target < 20 %, reported per stage by bench_solver.py). Compare figures within one run.
+times, at the converged stage-4 state, one contact force evaluation (neighbour search, gaps
+and gradients; the cache is dropped before each), one contact tangent (with its Hessians),
+and one assembly of the finite-element residual and of its Jacobian. A Newton step evaluates
+each once, so the ratios say what share of a step the contact costs. Compare figures within
+one run.
 """
 
 from __future__ import annotations
@@ -24,6 +23,8 @@ import statistics  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
@@ -61,30 +62,29 @@ def main() -> int:
     assert c is not None
     u = model.u.copy()
 
-    def search() -> None:
-        c._found = None  # force a new search at the same state
-        c._search_x = None
-        c._search(u)
-
-    def evaluate() -> None:
-        c._cache = None  # pairing kept, gaps and forces recomputed
+    def forces() -> None:
+        c._cache_x = None  # drop the cached state: search, gaps and gradients again
         c.force_vector(u)
 
-    c.freeze(u)
-    assert c._found is not None
-    n_points = sum(len(p.carrier) for p in c.points)
-    n_found = len(c._found.carrier)
-    t_search = _median_ms(search)
-    c.freeze(u)
-    t_eval = _median_ms(evaluate)
+    def tangent() -> None:
+        c._cache_x = None
+        c.tangent_csr(u)
+
+    engaged = int(np.sum(c.gaps(u) <= 0.0))
+    t_f, t_k = _median_ms(forces), _median_ms(tangent)
     t_res = _median_ms(lambda: model.problem.residual(model.newton.rvec))
-    c.unfreeze()
+    saved = c.k_V_kPa
+    c.k_V_kPa = 0.0  # the finite-element Jacobian alone
+    t_jac = _median_ms(lambda: model.problem.jacobian(model.problem.A), repeat=5)
+    c.k_V_kPa = saved
+    n_points = sum(len(p.nodes) for p in c.passes)
     print(f"mid-size wedge: {len(model.domain.cells)} cells; {n_points} contact points "
-          f"({[len(s.facets) for s in c.surfaces]} facets per flank), {n_found} candidates")  # fmt: skip
-    print(f"pair search (both passes)      {t_search:7.1f} ms")
-    print(f"contact forces, frozen pairing {t_eval:7.1f} ms")
+          f"({[len(p.facets) for p in c.passes]} master facets per pass), {engaged} engaged")  # fmt: skip
+    print(f"contact forces (search, gaps)  {t_f:7.1f} ms")
+    print(f"contact tangent                {t_k:7.1f} ms")
     print(f"residual assembly (FEM)        {t_res:7.1f} ms")
-    print(f"search / residual              {t_search / t_res:7.1f}")
+    print(f"Jacobian assembly (FEM)        {t_jac:7.1f} ms")
+    print(f"contact / FEM, one Newton step {(t_f + t_k) / (t_res + t_jac):7.2f}")
 
     return 0
 

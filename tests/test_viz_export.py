@@ -15,7 +15,7 @@ from viz_store import displacement, make_store, von_mises
 from woundsweep.cli import main
 from woundsweep.mesh.cache import load_mesh, mesh_path
 from woundsweep.model.parameters import ClosureZone
-from woundsweep.schema import DERMIS, SUBCUTIS, WOUND
+from woundsweep.schema import DERMIS, SUBCUTIS
 from woundsweep.sweep.grid import load_run
 from woundsweep.viz.surface import closure_zone_facets
 
@@ -69,7 +69,7 @@ def test_round_trip_read_by_vtk(store: Path, tmp_path: Path, capsys) -> None:
     steps = [(int(d.get("timestep")), d.get("file")) for d in pvd.iter("DataSet")]
     assert [k for k, _ in steps] == [1, 2, 3, 4, 5, 6]
     n_tet, n_tri = len(mesh.cells), len(mesh.facets)
-    zone = closure_zone_facets(mesh.points, mesh.facets, mesh.facet_tags, ClosureZone())
+    zone = closure_zone_facets(mesh.facet_tags)
     for k, name in steps:
         got = _read_vtu(out / "job-0" / name)
         np.testing.assert_array_equal(got["points"], mesh.points)
@@ -157,20 +157,6 @@ def test_bad_input_one_line_exit_2(store: Path, tmp_path: Path, capsys, args, ne
     assert needle in err and len(err.splitlines()) == 1
 
 
-def test_closure_zone_rule_on_a_known_patch() -> None:
-    # Four wound triangles: inside, too far in y, too deep, straddling the y limit.
-    pts = np.array(
-        [[0, -3, 0], [1, -3, -4], [0, 3, 0], [1, 0, 0], [1, 0.5, -1], [0, 0.5, 0],
-         [1, 2.5, 0], [1, 2.9, -0.5], [0, 1, -3], [1, 1, -3], [0, 0.9, -0.1], [0, 1.2, -0.1]],
-        float,
-    )  # fmt: skip
-    facets = np.array([[3, 4, 5], [6, 7, 2], [8, 9, 3], [3, 10, 11], [0, 1, 2]])
-    tags = np.array([WOUND, WOUND, WOUND, WOUND, 16])
-    # y in [-3, 3]: L_y = 3, so |y| <= 1; z_top 0, wound depth 3 (node 1 is not a wound node): z >= -1.5.
-    mask = closure_zone_facets(pts, facets, tags, ClosureZone(1 / 3, 0.5))
-    assert mask.tolist() == [True, False, False, False, False]
-
-
 @pytest.mark.fem
 def test_closure_zone_matches_the_solver(store: Path) -> None:
     from woundsweep.model.domain import WoundDomain
@@ -178,8 +164,7 @@ def test_closure_zone_matches_the_solver(store: Path) -> None:
     run = load_run(store)
     job = run.manifest.iloc[0]
     mesh = load_mesh(mesh_path(store, job["geometry_id"]))
-    zone = ClosureZone(0.4, 0.6)
-    dom = WoundDomain(mesh, zone)
+    dom = WoundDomain(mesh, ClosureZone())
     want = {tuple(sorted(f)) for f in np.concatenate([dom.zone_left_facets, dom.zone_right_facets])}
-    mask = closure_zone_facets(mesh.points, mesh.facets, mesh.facet_tags, zone)
+    mask = closure_zone_facets(mesh.facet_tags)
     assert want and {tuple(sorted(f)) for f in mesh.facets[mask]} == want

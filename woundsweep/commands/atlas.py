@@ -36,7 +36,6 @@ def cmd(run_dir: Path, out: Path | None, views: str) -> None:
     a demo job). The projected size of the chosen views is shown while it builds and the
     sizes are printed at the end.
     """
-    from ..model.parameters import ClosureZone
     from ..sweep.grid import load_run
     from ..sweep.results import read_results
     from ..viz.atlas import build_atlas, parse_views
@@ -65,9 +64,8 @@ def cmd(run_dir: Path, out: Path | None, views: str) -> None:
             est = info["view_bytes"] / info["cells_done"] * info["cells_total"]
             bar.set_postfix_str(f"views {_mb(info['view_bytes'])} of ~{_mb(est)}", refresh=False)
 
-    zone = ClosureZone.from_sweep(run.sweep.stages)
     try:
-        s = build_atlas(run, results, out, chosen, zone, progress)
+        s = build_atlas(run, results, out, chosen, progress)
     finally:
         bar.close()
     per = f", {s.view_bytes / s.views / 1e3:.0f} kB each" if s.views else ""

@@ -34,7 +34,6 @@ def cmd(run_dir: Path, job: int | None, all_: bool, out: Path) -> None:
     (Warp By Vector on displacement_mm shows the deformed state). Which stages exist is
     decided by `run --fields`; a stage without a field is named with the reason.
     """
-    from ..model.parameters import ClosureZone
     from ..sweep.grid import load_run
     from ..sweep.results import read_results
     from ..viz.export import export_job
@@ -43,11 +42,10 @@ def cmd(run_dir: Path, job: int | None, all_: bool, out: Path) -> None:
     if (job is not None) == all_:
         raise click.UsageError("give exactly one of --job N or --all")
     run = load_run(run_dir)
-    zone = ClosureZone.from_sweep(run.sweep.stages)
     if job is not None:
         row = job_row(run.manifest, job)
         rows = read_results(run.run_dir, [str(row["job_id"])])
-        info = export_job(load_job(run.run_dir, row, rows, zone), out)
+        info = export_job(load_job(run.run_dir, row, rows), out)
         stages = [s["stage"] for s in info["stages"] if s["file"]]
         where = out / f"job-{job}" / info["series"]
         click.echo(f"job {job}: stages {stages or 'none'} -> {where}")
@@ -61,7 +59,7 @@ def cmd(run_dir: Path, job: int | None, all_: bool, out: Path) -> None:
     n_stages, cache = 0, {}
     by_job = dict(tuple(results.groupby("job_id")))
     for row in tqdm(man.to_dict("records"), desc="export", unit="job", leave=False):
-        info = export_job(load_job(run.run_dir, row, by_job[row["job_id"]], zone, cache), out)
+        info = export_job(load_job(run.run_dir, row, by_job[row["job_id"]], cache), out)
         n_stages += sum(1 for s in info["stages"] if s["file"])
         reasons.update(s["not_exported"] for s in info["stages"] if s["not_exported"])
     pending = len(run.manifest) - len(man)

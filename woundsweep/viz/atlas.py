@@ -208,7 +208,6 @@ def build_atlas(
     results: pd.DataFrame,
     out: str | Path,
     views: set[int],
-    zone: Any,
     progress: Callable[[int, dict[str, Any]], None] | None = None,
 ) -> AtlasSummary:
     """Write the site of ``run`` (a `sweep.grid.Run`) with its validated ``results`` to ``out``.
@@ -254,7 +253,7 @@ def build_atlas(
                 f"no stored fields (`run --fields {rows[0]['fields']}`, {rows[0]['failure_class']})"
             )
         elif j in views:
-            jf = load_job(run.run_dir, job, rows, zone, cache)
+            jf = load_job(run.run_dir, job, rows, cache)
         footer = "<h2>Log</h2>\n" + _log_html(run.run_dir / "logs" / f"job-{job['job_id']}.log")
         body = job_body(
             job, rows, jf, view_note=note, header=_nav(j, prev, nxt, has_analysis), footer=footer

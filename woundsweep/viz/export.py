@@ -8,7 +8,7 @@ and the exterior triangles, with
 
 - point data ``displacement_mm`` (3 components; Warp By Vector shows the deformed state),
 - cell data ``von_mises_kPa`` (cellwise; NaN on the triangles), ``cell_tag`` (1 dermis,
-  2 subcutis; 0 on triangles), ``facet_tag`` (11-17 as in `schema.FACET_TAGS`; 0 on
+  2 subcutis; 0 on triangles), ``facet_tag`` (11-18 as in `schema.FACET_TAGS`; 0 on
   tetrahedra) and ``closure_zone`` (1 on the closure zone's wound triangles),
 The stage of a VTU is its PVD timestep (and in its name); units and the per-stage notes are
 in the JSON. Files are written by meshio (binary, zlib), each atomically.

@@ -147,10 +147,9 @@ def load_job(
     run_dir: str | Path,
     job: dict[str, Any],
     rows: pd.DataFrame | list[dict[str, Any]],
-    zone: Any,
     cache: dict[Any, Any] | None = None,
 ) -> JobFields:
-    """Read the job's mesh and stored fields; ``zone`` is the sweep's `ClosureZone`.
+    """Read the job's mesh and stored fields (the closure zone from the mesh's facet tags).
 
     ``rows`` are the job's validated result rows (`read_results`); a job without a fields
     file (failed early, or ``run --fields none``) gets the mesh and no fields. ``cache`` (a
@@ -176,7 +175,7 @@ def load_job(
     else:
         points, cells, cell_tags = _mesh_arrays(run_dir, job, groups, mesh_file)
         facets, facet_tags = _boundary(run_dir, job, points, cells)
-        in_zone = closure_zone_facets(points, facets, facet_tags, zone)
+        in_zone = closure_zone_facets(facet_tags)
         if MESH_GROUP not in groups and cache is not None:
             cache.clear()  # jobs come grouped by geometry: one mesh at a time
             cache[key] = (points, cells, cell_tags, facets, facet_tags, in_zone)
@@ -205,12 +204,10 @@ def load_job(
 
 def open_job(run_dir: str | Path, job_index: int, cache: dict[Any, Any] | None = None) -> JobFields:
     """`load_job` for one job of a run directory, with its validated rows."""
-    from ..model.parameters import ClosureZone
     from ..sweep.grid import load_run
     from ..sweep.results import read_results
 
     run = load_run(run_dir)
     job = job_row(run.manifest, job_index)
     rows = read_results(run.run_dir, [str(job["job_id"])])
-    zone = ClosureZone.from_sweep(run.sweep.stages)
-    return load_job(run.run_dir, job, rows, zone, cache)
+    return load_job(run.run_dir, job, rows, cache)

@@ -1,46 +1,25 @@
 """Mesh geometry the viewers need, in numpy: the closure zone's facets, the exterior surface
 with its cellwise stress, the zone's outline and the deformed location of the maximum.
 
-`closure_zone_facets` applies `ClosureZone`'s rule to the mesh arrays the way the solver's
-`WoundDomain` does (the same facets; a fem test compares them), so the viewers need no DOLFINx.
+The closure zone is the mesh's own facet tag (`woundsweep.schema.WOUND_ZONE`), the facets the
+solver's `WoundDomain` uses (a fem test compares them), so the viewers need no DOLFINx.
 """
 
 from __future__ import annotations
 
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import numpy as np
 
 from ..contact.geometry import owning_cells
-from ..schema import WOUND
+from ..schema import WOUND_ZONE
 
 __all__ = ["Surface", "closure_zone_facets", "max_cell_point", "surface_of", "zone_outline"]
 
 
-def closure_zone_facets(
-    points: np.ndarray, facets: np.ndarray, facet_tags: np.ndarray, zone: Any
-) -> np.ndarray:
-    """Mask over ``facets``: wound facets whose three nodes lie in the closure zone.
-
-    The zone: |y - y_c| <= y_fraction * L_y (y_c, L_y the patch's centre and half length in
-    y) and z >= z_top - depth_fraction * depth (depth from the top to the wound's lowest node).
-    """
-    wound = facet_tags == WOUND
-    mask = np.zeros(len(facets), dtype=bool)
-    if not wound.any():
-        return mask
-    lo, hi = points.min(axis=0), points.max(axis=0)
-    tol = 1e-9 * float(np.linalg.norm(hi - lo))
-    y_c, half_y, z_top = 0.5 * (lo[1] + hi[1]), 0.5 * (hi[1] - lo[1]), float(hi[2])
-    wound_pts = np.unique(facets[wound])
-    depth = z_top - points[wound_pts, 2].min()
-    y_lim = zone.y_fraction * half_y + tol
-    z_lim = z_top - zone.depth_fraction * depth - tol
-    in_zone = np.zeros(len(points), dtype=bool)
-    p = points[wound_pts]
-    in_zone[wound_pts] = (np.abs(p[:, 1] - y_c) <= y_lim) & (p[:, 2] >= z_lim)
-    mask[wound] = np.all(in_zone[facets[wound]], axis=1)
-    return mask
+def closure_zone_facets(facet_tags: np.ndarray) -> np.ndarray:
+    """Mask over the facets: the closure zone's, tagged ``WOUND_ZONE`` by the mesh."""
+    return np.asarray(facet_tags) == WOUND_ZONE
 
 
 class Surface(NamedTuple):

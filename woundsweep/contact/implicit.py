@@ -117,6 +117,6 @@ def pair_terms(
         out = W2[:, None, None] * ds[:, :, None] * ds[:, None, :] * f[:, None, None]
         out += W1[:, None, None] * (d2s * f[:, None, None] + sf + np.transpose(sf, (0, 2, 1)))
         out += W[:, None, None] * d2f
-        return np.einsum("ai,pab,bj->pij", V_TO_Q, out, V_TO_Q)
+        return V_TO_Q.T @ out @ V_TO_Q
 
     return PairTerms(W * tri, W * m, dN, dD, second(tri, dtri, d2tri), second(m, dm, d2m))

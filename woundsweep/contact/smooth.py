@@ -149,7 +149,7 @@ class FlankContact:
         q, f = self._pairs(x, ps)
         nq = len(ps.nodes)
         mf = ps.facets[f]
-        t = pair_terms(x[ps.nodes[q]], x[mf[:, 0]], x[mf[:, 1]], x[mf[:, 2]], ps.rho_mm[f], hessian)
+        t = pair_terms(x[ps.nodes[q]], x[mf[:, 0]], x[mf[:, 1]], x[mf[:, 2]], ps.rho_mm[f], False)
         N = np.bincount(q, weights=t.N, minlength=nq)
         D = np.bincount(q, weights=t.D, minlength=nq)
         gap = np.full(nq, np.inf)
@@ -164,8 +164,11 @@ class FlankContact:
         s_w, s_1, s_2 = support_step(t_sup)
         act_pt = np.flatnonzero((gap <= 0.0) & (s_w > 0.0))
         keep = np.isin(q, act_pt)
-        q, mf = q[keep], mf[keep]
-        t = type(t)(*(None if a is None else a[keep] for a in t))
+        q, f, mf = q[keep], f[keep], mf[keep]
+        if hessian:  # second derivatives only for the engaged points' pairs
+            t = pair_terms(x[ps.nodes[q]], x[mf[:, 0]], x[mf[:, 1]], x[mf[:, 2]], ps.rho_mm[f])
+        else:
+            t = type(t)(*(None if a is None else a[keep] for a in t))
         rank = np.full(nq, -1, dtype=np.int64)
         rank[act_pt] = np.arange(len(act_pt))
         qa = rank[q]

@@ -185,7 +185,7 @@ def test_forked_solve_equals_a_fresh_interpreter(server: ForkServer, tmp_path: P
     assert sorted(a) == sorted(b) and "stage_1/displacement_mm" in a
     assert a.pop("rows") == b.pop("rows")
     for key in a:
-        assert np.array_equal(a[key], b[key]), key
+        assert np.array_equal(a[key], b[key], equal_nan=True), key  # profiles: NaN off the body
     assert np.abs(a["stage_1/displacement_mm"]).max() > 0
 
 

@@ -13,7 +13,6 @@ timeout. This makes hundreds of real CLI runs take seconds instead of minutes of
 from __future__ import annotations
 
 import json
-import logging
 import os
 import resource
 import signal
@@ -47,13 +46,7 @@ def _child(req: dict) -> None:
     except BaseException:  # noqa: BLE001 - what the interpreter would print for it
         traceback.print_exc()
         code = 1
-    logging.shutdown()
-    for stream in (sys.stdout, sys.stderr):
-        try:
-            stream.flush()
-        except (OSError, ValueError):
-            pass
-    os._exit(code)
+    woundsweep.cli.exit_now(code)
 
 
 def _serve(req: dict) -> dict:

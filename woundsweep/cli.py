@@ -130,7 +130,11 @@ def console_main() -> NoReturn:
     ``woundsweep slurm`` with a bad option printed its one-line error, then exited -6).
     Every file the commands write is closed (and atomically renamed) before they return.
     """
-    code = main()
+    exit_now(main())
+
+
+def exit_now(code: int) -> NoReturn:
+    """Flush logging and the standard streams, then end the process without teardown."""
     logging.shutdown()
     for stream in (sys.stdout, sys.stderr):
         try:

@@ -6,7 +6,7 @@
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -45,8 +45,11 @@ class SchemeFit(NamedTuple):
     meta: dict[str, Any]
 
 
-def feature_ranges(X: np.ndarray) -> dict[str, dict[str, list[float]]]:
-    """Per wound shape, [min, max] of every numeric feature over the rows of ``X``."""
+def _per_shape(
+    X: np.ndarray, summarise: Callable[[np.ndarray], list[float] | None]
+) -> dict[str, dict[str, list[float]]]:
+    """Per wound shape, ``summarise`` of each numeric feature's finite values over the rows of
+    ``X`` (a feature left out where it gives None)."""
     out: dict[str, dict[str, list[float]]] = {}
     shape_col = FEATURES.index("wound_shape")
     for shape, code in SHAPE_CODES.items():
@@ -55,29 +58,28 @@ def feature_ranges(X: np.ndarray) -> dict[str, dict[str, list[float]]]:
             continue
         out[shape] = {}
         for j, name in enumerate(FEATURES):
-            vals = sub[:, j][np.isfinite(sub[:, j])]
-            if name in ("wound_shape", "skin_type", "stage") or len(vals) == 0:
+            if name in ("wound_shape", "skin_type", "stage"):
                 continue
-            out[shape][name] = [float(vals.min()), float(vals.max())]
+            got = summarise(sub[:, j][np.isfinite(sub[:, j])])
+            if got is not None:
+                out[shape][name] = got
     return out
+
+
+def feature_ranges(X: np.ndarray) -> dict[str, dict[str, list[float]]]:
+    """Per wound shape, [min, max] of every numeric feature over the rows of ``X``."""
+    return _per_shape(X, lambda v: [float(v.min()), float(v.max())] if len(v) else None)
 
 
 def feature_levels(X: np.ndarray) -> dict[str, dict[str, list[float]]]:
     """Per wound shape, the distinct training values of every numeric feature (the grid's
     values), or none for a feature with more than `MAX_LEVELS` of them."""
-    out: dict[str, dict[str, list[float]]] = {}
-    shape_col = FEATURES.index("wound_shape")
-    for shape, code in SHAPE_CODES.items():
-        sub = X[X[:, shape_col] == code]
-        if len(sub) == 0:
-            continue
-        out[shape] = {}
-        for j, name in enumerate(FEATURES):
-            vals = np.unique(sub[:, j][np.isfinite(sub[:, j])])
-            if name in ("wound_shape", "skin_type", "stage") or not 0 < len(vals) <= MAX_LEVELS:
-                continue
-            out[shape][name] = vals.tolist()
-    return out
+
+    def levels(v: np.ndarray) -> list[float] | None:
+        u = np.unique(v)
+        return u.tolist() if 0 < len(u) <= MAX_LEVELS else None
+
+    return _per_shape(X, levels)
 
 
 def fit_scheme(

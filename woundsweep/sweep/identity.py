@@ -19,23 +19,13 @@ from pathlib import Path
 from typing import Any
 
 from ..mesh.sizing import MESH_LAW_VERSION
+from .grid import GEOMETRY_KEYS
 
 __all__ = ["FORMAT_VERSION", "file_sha256", "fingerprints", "result_fingerprint"]
 
 # The result files' format (`results.result_schema`, the footer record); part of the identity.
 FORMAT_VERSION = 2
-_JOB_KEYS = (
-    "wound_shape",
-    "dermal_thickness_mm",
-    "subcutis_thickness_factor",
-    "patch_size_factor",
-    "wound_width_factor",
-    "mesh_size_factor",
-    "wound_depth_factor",
-    "wound_aspect_factor",
-    "orientation_deg",
-    "skin_type",
-)
+_JOB_KEYS = (*GEOMETRY_KEYS, "orientation_deg", "skin_type")
 
 
 def _plain(v: Any) -> Any:

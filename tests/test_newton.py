@@ -224,3 +224,52 @@ def test_convergence_is_judged_after_a_full_newton_step() -> None:
     assert np.linalg.norm(r) <= st.atol
     du = -r * (1.0 + p.u**2)  # the full step from the returned state
     assert np.abs(du).max() <= st.stol
+
+
+class _Springs(_DoubleWell):
+    """E = u.K u / 2 - f.u with a full SPD K: linear, so one Newton step solves it."""
+
+    K = np.array([[4.0, -1.0, 0.5], [-1.0, 3.0, -0.8], [0.5, -0.8, 2.0]])
+    f = np.array([1.0, -2.0, 0.3])
+
+    def _grad(self) -> np.ndarray:
+        return self.K @ self.u - self.f
+
+    def jacobian(self, A: Any) -> None:
+        A.zeroEntries()
+        A.setValues([0, 1, 2], [0, 1, 2], self.K.ravel())
+        A.assemble()
+
+    def energy(self) -> float:
+        return float(0.5 * self.u @ self.K @ self.u - self.f @ self.u)
+
+    def max_strain(self, du: np.ndarray) -> float:
+        return 0.0  # linear: no step-size limit
+
+
+@pytest.mark.fem
+@pytest.mark.parametrize("symmetric", [False, True])
+def test_prescribed_values_couple_into_the_free_dofs(symmetric: bool) -> None:
+    """u_2 = 0.7 prescribed from u = 0: the free dofs must solve K_ff u_f = f_f - K_f2 0.7.
+    The symmetric (LDL^T) path eliminates column 2 too, so that coupling must reach the
+    right-hand side; the LU path keeps it in the matrix. The problem is linear, so the first
+    step is exact and the second (the full-step check) moves nothing: two iterations."""
+    from petsc4py import PETSc
+
+    from woundsweep.solver.newton import NewtonSolver, Policy
+
+    p = _Springs([0.0, 0.0, 0.0])
+    A = PETSc.Mat().createAIJ([3, 3], nnz=3)
+    A.setUp()
+    A.setValues([0, 1, 2], [0, 1, 2], np.ones(9))
+    A.assemble()
+    st = NewtonSettings(rtol=0.0, atol=1e-12, stol=1e-12)
+    newton = NewtonSolver(p, A, st)
+    rows = np.array([2], dtype=np.int32)
+    res = newton.solve(rows, np.array([0.7]), policy=Policy(st, symmetric=symmetric))
+    assert res.status == CONVERGED
+    K, f = _Springs.K, _Springs.f
+    expected = np.linalg.solve(K[:2, :2], f[:2] - K[:2, 2] * 0.7)
+    np.testing.assert_allclose(p.u, [*expected, 0.7], rtol=0, atol=1e-12)
+    assert res.iterations == 2
+    assert newton._pc_kind == ("cholesky" if symmetric else "lu")

@@ -159,8 +159,14 @@ class WoundModel:
         return out
 
     def _ramp(
-        self, rows: np.ndarray, target: np.ndarray, offset: np.ndarray | None
+        self,
+        rows: np.ndarray,
+        target: np.ndarray,
+        offset: np.ndarray | None,
+        symmetric: bool = True,
     ) -> ContinuationResult:
+        """Continuation from the current state to ``target`` at ``rows`` with ``offset``
+        released; ``symmetric`` unless a follower load makes the tangent non-symmetric."""
         u = self.u
         start = u[rows].copy()
         free_offset = None
@@ -173,7 +179,8 @@ class WoundModel:
             return LoadState(start + s * (target - start), off)
 
         scale = float(np.linalg.norm(self.problem.internal_force()))
-        return continuation(self.newton, rows, load, force_scale=scale)
+        policy = Policy(self.settings, symmetric=symmetric)
+        return continuation(self.newton, rows, load, force_scale=scale, policy=policy)
 
     def _stage1(self) -> tuple[ContinuationResult, dict[str, float]]:
         """Pre-tension (eqs. 12-14): u = (TSF - 1)(x - x_c) on the x faces, likewise in y,
@@ -236,7 +243,8 @@ class WoundModel:
         self.forms.follow.value = 1.0
         offset = self.problem.residual_array()
         rows = self.domain.gauge_rows()
-        res = self._ramp(rows, self.u[rows].copy(), offset)
+        # The closure traction follows the deformation (Nanson): a non-symmetric tangent.
+        res = self._ramp(rows, self.u[rows].copy(), offset, symmetric=False)
         r = self.problem.residual_array()
         diag = {
             "closure_gap_mm": self.closure_gap(),
@@ -257,11 +265,12 @@ class WoundModel:
         u = self.u
         c = self.contact
         if c is None:  # no wound: nothing can touch; the stage re-solves the stage-3 loads
-            return self._ramp(rows, u[rows].copy(), self.problem.residual_array()), {}
+            offset = self.problem.residual_array()
+            return self._ramp(rows, u[rows].copy(), offset, symmetric=False), {}
         k_from, k_to, load, scale = self._contact_load(stage, rows)
         # The residual of a penetrating start holds penalty forces far above the physical
         # ones: they must not set the convergence tolerance (a fixed force scale).
-        policy = Policy(self.settings, energy_merit=True, fixed_scale=True)
+        policy = Policy(self.settings, energy_merit=True, fixed_scale=True, symmetric=True)
         try:
             decades = np.log10(k_to / k_from)
             res = continuation(

@@ -64,6 +64,7 @@ class Policy(NamedTuple):
     settings: NewtonSettings
     energy_merit: bool = False  # accept updates by Armijo's rule on the potential
     fixed_scale: bool = False  # the force scale stays the given one (not grown by |R|)
+    symmetric: bool = False  # the tangent is symmetric: LDL^T instead of LU (`NewtonSolver`)
 
 
 class NonlinearProblem(Protocol):
@@ -144,6 +145,7 @@ class NewtonSolver:
         pc.setFactorSolverType("mumps")
         self.ksp.setErrorIfNotConverged(False)
         self._factored = False
+        self._pc_kind = "lu"
         self.gamma = 1.0
         self._mu = 0.0  # the last shift that gave a descent step (`_shifted`; see `reset`)
 
@@ -175,12 +177,35 @@ class NewtonSolver:
             e -= float(np.dot(offset, self.problem.solution()))
         return e
 
-    def _factor(self, rows: np.ndarray) -> tuple[float, float]:
-        """Assemble J with identity rows at ``rows`` and factorise: (assembly s, factor s)."""
+    def _factor(self, rows: np.ndarray, rhs: np.ndarray) -> tuple[float, float]:
+        """Assemble J with identity rows at ``rows`` and factorise: (assembly s, factor s).
+
+        Under `Policy.symmetric` the columns at ``rows`` are eliminated too, so the matrix
+        stays symmetric and MUMPS factorises it as LDL^T (symmetric indefinite), about 1.5x
+        faster than LU; the prescribed values' column terms then move to ``rhs`` (in place).
+        """
         t0 = time.perf_counter()
         self.problem.jacobian(self.A)
-        self.A.zeroRows(rows, diag=1.0)
+        kind = "cholesky" if self._policy.symmetric else "lu"
+        if kind == "cholesky":
+            lift = np.zeros(len(rhs))
+            lift[rows] = rhs[rows]
+            if np.any(lift):
+                x, y = self.A.createVecs()
+                x.getArray()[:] = lift
+                self.A.mult(x, y)
+                free_part = y.getArray(readonly=True).copy()
+                free_part[rows] = 0.0
+                rhs -= free_part
+            self.A.zeroRowsColumns(rows, diag=1.0)
+        else:
+            self.A.zeroRows(rows, diag=1.0)
         t1 = time.perf_counter()
+        if kind != self._pc_kind:
+            self.ksp.getPC().setType(kind)
+            self.ksp.getPC().setFactorSolverType("mumps")
+            self._pc_kind = kind
+            self._factored = False
         if not self._factored:
             self.ksp.setOperators(self.A)
             pc = self.ksp.getPC()
@@ -274,7 +299,7 @@ class NewtonSolver:
             rhs = -r_free
             rhs[rows] = bc_err
             try:
-                ta, tf = self._factor(rows)
+                ta, tf = self._factor(rows, rhs)
                 t_asm += ta
                 t_fac += tf
                 t0 = time.perf_counter()

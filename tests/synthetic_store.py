@@ -166,15 +166,22 @@ def write_results(run_dir: str | Path, rows: pd.DataFrame) -> None:
     """Write ``rows`` (manifest columns + stage results) as one result file per job.
 
     Stages with status ``not-run`` are left out of the job's solver output, so the store
-    writes them as not run; a job whose stages did not all converge is ``not-converged``.
+    writes them as not run; ``profile_*`` columns (NaN: absent) go to ``stage_extra_json``;
+    a job whose stages did not all converge is ``not-converged``.
     """
     store = Store(run_dir)
     fields = STAGE_RESULT_COLUMNS[2:]
+    # Columns named profile_* are solver extras: the store keeps them in stage_extra_json.
+    extra = [c for c in rows.columns if c.startswith("profile_")]
     records = rows.to_dict("records")
     for idx in rows.groupby("job_id", sort=False).indices.values():
         job = [records[i] for i in idx]
         stages = {
-            int(r["stage"]): {"status": r["status"], **{f: r[f] for f in fields}}
+            int(r["stage"]): {
+                "status": r["status"],
+                **{f: r[f] for f in fields},
+                **{c: r[c] for c in extra if pd.notna(r[c])},
+            }
             for r in job
             if r["status"] != StageStatus.NOT_RUN
         }

@@ -41,6 +41,7 @@ FIGURES = [
     "stress_distribution",
     "stiff_vs_soft",
     "max_location",
+    "max_location_profiles",
 ]
 TRAINING_COLUMNS = [
     "wound_shape", "dermal_thickness_mm", "subcutis_thickness_factor", "patch_size_factor",
@@ -118,6 +119,14 @@ def test_analyze_writes_every_output(analyzed: tuple[Path, str], results: pd.Dat
         ).is_file()
     report = (a / "report.md").read_text()
     assert "macro-average AUC" in report and "93.5%" in report and "79.9%" in report
+    # The synthetic store has one mesh size factor and no stored line maxima.
+    assert "No matched geometries" in report and not (a / "mesh_sensitivity.png").exists()
+    assert (
+        metrics["max_location_profiles"]["groups"]["stage 1"]["lines"]["along_wound"][
+            "rows_without_position"
+        ]
+        == metrics["rows"]["used_rows_by_stage"]["1"]
+    )
 
 
 def test_identical_seeds_give_identical_metrics(

@@ -12,7 +12,9 @@ validated reader, the model matrix), `splits` (quantile classes, the two schemes
 soft, locations of the maximum), `fitting` (one scheme end to end, `SchemeFit`),
 `regression` (the stress surrogate of log p99) and `conformal` (its split-conformal
 intervals), `failure` (the failure-probability model), `sensitivity` (Sobol indices,
-SALib), `pipeline` (`run_analysis`), `model_io` (model files), `prediction`, `figures` and
+SALib), `profile_locations` (Figure 2 from the profile lines), `mesh_sensitivity`
+(matched geometries across mesh size factors), `pipeline` (`run_analysis`), `model_io`
+(model files), `prediction`, `figures` (with `figures_profiles`, `figures_mesh`) and
 `report`. Names are
 re-exported lazily, so importing the package loads neither XGBoost nor matplotlib.
 """

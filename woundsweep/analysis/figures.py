@@ -43,7 +43,8 @@ __all__ = [
 # Per-scheme figures carry a ``_<scheme>`` suffix.
 FIGURE_STEMS = {
     "per_scheme": ("training", "importance", "roc", "confusion"),
-    "shared": ("stress_distribution", "stiff_vs_soft", "max_location"),
+    "shared": ("stress_distribution", "stiff_vs_soft", "max_location", "max_location_profiles"),
+    "mesh": ("mesh_sensitivity",),  # only with matched geometries (`mesh_sensitivity`)
     "surrogate": ("surrogate_test", "sobol"),
 }
 

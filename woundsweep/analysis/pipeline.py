@@ -21,8 +21,10 @@ from ..fsutil import atomic_write_bytes
 from .data import drop_orphans, encode_features, load_results, select_rows, sweep_settings
 from .failure import fit_failure
 from .fitting import fit_scheme
+from .mesh_sensitivity import matched_ratios, mesh_sensitivity
 from .model_io import json_bytes, save_companions, save_model
 from .paper import location_summary, normalised_locations, stiff_vs_soft
+from .profile_locations import profile_positions, profile_summary
 from .report import write_report
 from .settings import (
     FEATURES,
@@ -80,6 +82,8 @@ def run_analysis(
     import xgboost as xgb
 
     from . import figures
+    from .figures_mesh import mesh_ratio_figure
+    from .figures_profiles import profile_max_locations
 
     rd = Path(run_dir)
     if not rd.is_dir():
@@ -108,6 +112,7 @@ def run_analysis(
     failure = fit_failure(results, skins, settings)
     svs, pairs = stiff_vs_soft(rows)
     locs = normalised_locations(rows)
+    pos = profile_positions(rows)
     stress = rows[STRESS].to_numpy(dtype=np.float64)
     metrics: dict[str, Any] = {
         "woundsweep_version": __version__,
@@ -129,7 +134,9 @@ def run_analysis(
         "failure": failure.metrics,
         "stiff_vs_soft": svs,
         "max_location": location_summary(locs),
+        "max_location_profiles": profile_summary(pos),
     }
+    metrics["mesh_sensitivity"] = mesh_sensitivity(rows, metrics)
     out = Path(out_dir) if out_dir is not None else rd / "analysis"
     out.mkdir(parents=True, exist_ok=True)
     files: list[Path] = []
@@ -139,6 +146,10 @@ def run_analysis(
         files += save_companions(out, surrogate, failure)
     say("writing figures...")
     figs = figures.write_all(out, fits, stress, rows["stage"].to_numpy(), pairs, svs, locs)
+    figs += figures.save(profile_max_locations(pos), out, "max_location_profiles")
+    ratios, _ = matched_ratios(rows)
+    if not ratios.empty:
+        figs += figures.save(mesh_ratio_figure(ratios), out, "mesh_sensitivity")
     if surrogate is not None:
         figs += figures.write_surrogate(out, surrogate, rows, surrogate_metrics["sensitivity"])
     files += figs

@@ -7,6 +7,8 @@ from pathlib import Path
 from typing import Any
 
 from ..fsutil import atomic_write_bytes
+from .mesh_sensitivity import report_lines as mesh_report_lines
+from .profile_locations import report_lines as profile_report_lines
 
 __all__ = ["PAPER", "render_report", "write_report"]
 
@@ -118,6 +120,10 @@ def render_report(metrics: dict[str, Any], figures: Sequence[str]) -> str:
         label = "cylindrical (paper: curved)" if shape == "cylindrical" else shape
         lines.append(f"| {label} | {100 * k / n:.1f}% ({k:,}/{n:,}), p < 0.001 | {ours} | {p} |")
     lines += surrogate_lines(metrics)
+    if "max_location_profiles" in metrics:
+        lines += profile_report_lines(metrics)
+    if "mesh_sensitivity" in metrics:
+        lines += mesh_report_lines(metrics["mesh_sensitivity"])
     lines += [
         "",
         "## How these numbers differ from the paper's method",

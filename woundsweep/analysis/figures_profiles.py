@@ -1,0 +1,93 @@
+"""Figure 2 from the profile lines: where each line's maximum sits, per stage group.
+
+Top row: the three lines drawn in a schematic patch (top view for the lines at the surface,
+a section for the one through the thickness). Below, one row per `STAGE_GROUPS` entry: the
+histogram of the position of each line's maximum (`profile_locations`).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import matplotlib
+
+matplotlib.use("Agg")
+
+import numpy as np  # noqa: E402
+import pandas as pd  # noqa: E402
+from matplotlib.figure import Figure  # noqa: E402
+from matplotlib.patches import Rectangle  # noqa: E402
+
+from ..model.profiles import PROFILE_LINES  # noqa: E402
+from .profile_locations import bin_edges, profile_counts  # noqa: E402
+from .settings import STAGE_GROUPS  # noqa: E402
+
+__all__ = ["profile_max_locations"]
+
+_TITLES = {
+    "along_wound": ("along the wound (x = 0, z = 0)", "(y + L) / 2L"),
+    "through_thickness": ("through the thickness (x = 0, y = 0)", "-z / T (0 = surface)"),
+    "across_patch": ("across the patch (y = 0, z = 0)", "(x - w/2) / (L + w/2)"),
+}
+# Proportions of the schematic patch only (L, w, T in arbitrary units).
+_L, _W, _T = 1.0, 0.5, 0.6
+
+
+def _schematic(ax: Any, line: str) -> None:
+    """The patch in top view (x, y) or section (x, z) with the wound and the line in red."""
+    section = line == "through_thickness"
+    h = (-_T, 0.0) if section else (-_L, _L)
+    ax.add_patch(Rectangle((-_L, h[0]), 2 * _L + _W, h[1] - h[0], fc="0.93", ec="0.4", lw=0.8))
+    if section:
+        # A wedge wound in section: open at the surface, its tip at half the depth.
+        ax.fill([0, _W, _W / 2], [0, 0, -_T / 2], color="white", ec="0.4", lw=0.8)
+        ax.plot([0, 0], [-_T, 0], color="tab:red", lw=2.5)
+    else:
+        ax.add_patch(Rectangle((0, -_L), _W, 2 * _L, fc="white", ec="0.4", lw=0.8))
+        ax.plot([0, _W], [_L / 3] * 2, color="0.4", ls="--", lw=0.8)
+        ax.plot([0, _W], [-_L / 3] * 2, color="0.4", ls="--", lw=0.8)
+        if line == "along_wound":
+            ax.plot([0, 0], [-_L, _L], color="tab:red", lw=2.5)
+        else:
+            ax.plot([-_L, 0], [0, 0], color="tab:red", lw=2.5)
+            ax.plot([_W, _L + _W], [0, 0], color="tab:red", lw=2.5)
+            ax.plot([0, _W], [0, 0], color="tab:red", lw=1, ls=":")
+    ax.set_xlim(-_L - 0.1, _L + _W + 0.1)
+    ax.set_ylim(h[0] - 0.1, h[1] + 0.1)
+    ax.set_aspect("equal")
+    ax.set_axis_off()
+    ax.set_title(_TITLES[line][0] + ("\nsection y = 0" if section else "\ntop view"), fontsize=9)
+
+
+def profile_max_locations(pos: pd.DataFrame) -> Figure:
+    """Figure 2 (profile lines): histograms of the position of each line's maximum."""
+    fig = Figure(figsize=(10, 9), layout="constrained")
+    axes = fig.subplots(
+        len(STAGE_GROUPS) + 1, 3, squeeze=False, height_ratios=[0.8] + [1] * len(STAGE_GROUPS)
+    )
+    for j, line in enumerate(PROFILE_LINES):
+        _schematic(axes[0, j], line)
+        edges = bin_edges(line)
+        for i, (group, _) in enumerate(STAGE_GROUPS, start=1):
+            ax = axes[i, j]
+            sel = pos[pos["stage_group"] == group]
+            counts, _out = profile_counts(sel[f"{line}_index"].to_numpy(dtype=float), line)
+            ax.bar(edges[:-1], counts, np.diff(edges), align="edge",
+                   color="tab:red" if i == 2 else "tab:blue")  # fmt: skip
+            ax.set_xlim(edges[0], edges[-1])
+            if line == "along_wound":
+                for v in (1 / 3, 2 / 3):
+                    ax.axvline(v, color="grey", lw=0.8, ls="--")
+            if i == len(STAGE_GROUPS):
+                ax.set_xlabel(_TITLES[line][1])
+            if j == 0:
+                ax.set_ylabel(f"{group}\n(n={len(sel)})")
+            missing = int(sel[f"{line}_index"].isna().sum())
+            if missing:
+                ax.text(0.98, 0.95, f"{missing} rows without a position", ha="right", va="top",
+                        transform=ax.transAxes, fontsize=7)  # fmt: skip
+    fig.suptitle(
+        "Location of the maximal von Mises stress on each profile line (100 points; "
+        "dashed: ends of the closure zone)"
+    )
+    return fig

@@ -67,7 +67,7 @@ def _gone(pid: int, timeout: float = 10) -> bool:
         try:
             if _stat(pid)[0] == "Z":
                 return True
-        except FileNotFoundError:
+        except (FileNotFoundError, ProcessLookupError):  # reaped before or while reading
             return True
         time.sleep(0.02)
     return False

@@ -20,7 +20,6 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import logging  # noqa: E402
-import statistics  # noqa: E402
 import sys  # noqa: E402
 import tempfile  # noqa: E402
 import time  # noqa: E402
@@ -31,19 +30,12 @@ import numpy as np  # noqa: E402
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
+from timing import median_ms  # noqa: E402
+
 from woundsweep.mesh.build import build_mesh  # noqa: E402
 from woundsweep.mesh.spec import GeometrySpec  # noqa: E402
 
 __all__ = ["main"]
-
-
-def _median_ms(fn, repeat: int) -> float:  # type: ignore[no-untyped-def]
-    times = []
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return 1e3 * statistics.median(times)
 
 
 def _measure(mesh, flags: list[str] | None, cache: str) -> dict[str, object]:  # type: ignore[no-untyped-def]
@@ -63,8 +55,8 @@ def _measure(mesh, flags: list[str] | None, cache: str) -> dict[str, object]:  #
     model.run_stage(1)
     p = model.problem
     b = model.newton.rvec
-    t_res = _median_ms(lambda: p.residual(b), 15)
-    t_jac = _median_ms(lambda: p.jacobian(p.A), 7)
+    t_res = median_ms(lambda: p.residual(b), 15)
+    t_jac = median_ms(lambda: p.jacobian(p.A), 7)
     p.residual(b)
     p.jacobian(p.A)
     ai, aj, av = p.A.getValuesCSR()

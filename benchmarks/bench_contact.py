@@ -19,9 +19,7 @@ import os
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
-import statistics  # noqa: E402
 import sys  # noqa: E402
-import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
@@ -29,19 +27,12 @@ import numpy as np  # noqa: E402
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
+from timing import median_ms  # noqa: E402
+
 from woundsweep.mesh.build import build_mesh  # noqa: E402
 from woundsweep.mesh.spec import GeometrySpec  # noqa: E402
 
 __all__ = ["main"]
-
-
-def _median_ms(fn, repeat: int = 15) -> float:  # type: ignore[no-untyped-def]
-    times = []
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return 1e3 * statistics.median(times)
 
 
 def main() -> int:
@@ -71,11 +62,11 @@ def main() -> int:
         c.tangent_csr(u)
 
     engaged = int(np.sum(c.gaps(u) <= 0.0))
-    t_f, t_k = _median_ms(forces), _median_ms(tangent)
-    t_res = _median_ms(lambda: model.problem.residual(model.newton.rvec))
+    t_f, t_k = median_ms(forces), median_ms(tangent)
+    t_res = median_ms(lambda: model.problem.residual(model.newton.rvec))
     saved = c.k_V_kPa
     c.k_V_kPa = 0.0  # the finite-element Jacobian alone
-    t_jac = _median_ms(lambda: model.problem.jacobian(model.problem.A), repeat=5)
+    t_jac = median_ms(lambda: model.problem.jacobian(model.problem.A), repeat=5)
     c.k_V_kPa = saved
     n_points = sum(len(p.nodes) for p in c.passes)
     print(f"mid-size wedge: {len(model.domain.cells)} cells; {n_points} contact points "

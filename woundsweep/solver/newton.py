@@ -188,15 +188,14 @@ class NewtonSolver:
         self.problem.jacobian(self.A)
         kind = "cholesky" if self._policy.symmetric else "lu"
         if kind == "cholesky":
-            lift = np.zeros(len(rhs))
-            lift[rows] = rhs[rows]
-            if np.any(lift):
-                x, y = self.A.createVecs()
-                x.getArray()[:] = lift
-                self.A.mult(x, y)
-                free_part = y.getArray(readonly=True).copy()
-                free_part[rows] = 0.0
-                rhs -= free_part
+            if np.any(rhs[rows]):  # values still to impose: lift their columns (dx, b: scratch)
+                x = self.dx.getArray()
+                x[:] = 0.0
+                x[rows] = rhs[rows]
+                self.A.mult(self.dx, self.b)
+                lifted = self.b.getArray(readonly=True).copy()
+                lifted[rows] = 0.0
+                rhs -= lifted
             self.A.zeroRowsColumns(rows, diag=1.0)
         else:
             self.A.zeroRows(rows, diag=1.0)

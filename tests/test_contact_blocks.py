@@ -31,7 +31,13 @@ import numpy as np
 import pytest
 from box_mesh import boundary_facets, box_tets
 
-from woundsweep.contact import GPA_TO_KPA, ContactSummary, FlankContact, orient_outward
+from woundsweep.contact import (
+    GPA_TO_KPA,
+    ContactMultipliers,
+    ContactSummary,
+    FlankContact,
+    orient_outward,
+)
 from woundsweep.model.materials import Fung, first_piola
 
 pytestmark = pytest.mark.fem
@@ -124,6 +130,7 @@ class Blocks:
         left = orient_outward(X, self.cell_nodes, input_node[left_wall])
         right = orient_outward(X, self.cell_nodes, input_node[right_wall])
         self.contact = FlankContact(X, left, right)
+        self.multipliers = ContactMultipliers(self.contact, self.solution)
 
     # -- NonlinearProblem ---------------------------------------------------------------------
 
@@ -141,9 +148,6 @@ class Blocks:
 
         compat.assemble_matrix(A, self.a_form)
         self.contact.add_jacobian(A, self.u.x.array)
-
-    def energy(self) -> float | None:
-        return None  # the dead load's work is not in a form: no potential to merit
 
     def _grad(self, w: np.ndarray) -> np.ndarray:
         W = w.reshape(-1, 3)[self.cell_nodes]
@@ -165,6 +169,7 @@ class Run(NamedTuple):
     summary: ContactSummary
     u: np.ndarray
     reaction_x_mN: float  # sum of the residual over the u_x = 0 rows of L's x = -1 face
+    mult_mismatch: float  # max |mu - c psi| / max |c psi|: the carried multipliers at the end
     time_s: float
 
 
@@ -176,6 +181,7 @@ def solve_blocks(n_right: int) -> dict[str, Any]:
 
     from woundsweep.solver import LoadState, NewtonSettings, NewtonSolver
     from woundsweep.solver.continuation import continuation
+    from woundsweep.solver.newton import Policy
 
     material = dataclasses.replace(Fung.normal(0.0), a1=ufl.as_vector((1.0, 0.0, 0.0)))
     t0 = time.perf_counter()
@@ -186,6 +192,7 @@ def solve_blocks(n_right: int) -> dict[str, Any]:
     prob.contact.k_V_kPa = K_V_GPA[0] * GPA_TO_KPA
     start = prob.contact.gaps(u)
     newton = NewtonSolver(prob, prob.A, NewtonSettings())
+    policy = Policy.contact(newton.settings)  # as the wound's contact stages solve
     zeros = np.zeros(len(prob.rows))
     scale = float(np.linalg.norm(prob.f_ext))
     wall_x = prob.rows[(prob.rows % 3 == 0) & (np.abs(prob.X[prob.rows // 3, 0] + 1) < 1e-9)]
@@ -196,15 +203,17 @@ def solve_blocks(n_right: int) -> dict[str, Any]:
         t0 = time.perf_counter()
         if k == K_V_GPA[0]:
             res = continuation(newton, prob.rows, lambda s: LoadState(zeros, s * prob.f_ext),
-                               force_scale=scale)  # fmt: skip
+                               force_scale=scale, policy=policy)  # fmt: skip
             status, its = res.status, res.iterations
         else:
-            r = newton.solve(prob.rows, zeros, prob.f_ext, force_scale=scale)
+            r = newton.solve(prob.rows, zeros, prob.f_ext, force_scale=scale, policy=policy)
             status, its = r.status, r.iterations
         dt = time.perf_counter() - t0
         prob.residual(b)
         reaction = float(b.getArray(readonly=True)[wall_x].sum())
-        runs[k] = Run(status, its, prob.contact.summary(u), u.copy(), reaction, dt)
+        own = prob.contact.penalty_multipliers(u)
+        mismatch = float(np.abs(prob.contact.mult - own).max() / np.abs(own).max())
+        runs[k] = Run(status, its, prob.contact.summary(u), u.copy(), reaction, mismatch, dt)
     name = "matching" if n_right == N_BOX else "non-matching"
     print(f"\n{name}: build (mesh, JIT, contact setup) {t_build:.1f} s")
     for k, run in runs.items():
@@ -249,6 +258,8 @@ def test_contact_force_balances_the_load(solved, k_gpa: float) -> None:
     assert s.max_penetration_mm > 0
     # The load goes on through L to its support: the reaction there is the load, too.
     assert abs(abs(run.reaction_x_mN) - load) / load < 0.01
+    # Solved by the semi-smooth step: at convergence its multipliers are the penalty's forces.
+    assert run.mult_mismatch < 1e-6
 
 
 def test_penetration_shrinks_like_one_over_k_V(solved) -> None:

@@ -1,5 +1,5 @@
 """Load continuation (woundsweep.solver.continuation) against a scripted Newton solver, and
-Newton's energy merit on a double well."""
+Newton's convergence check and Dirichlet elimination on small problems."""
 
 from __future__ import annotations
 
@@ -115,10 +115,6 @@ class _DoubleWell:
         A.setValues([0, 1], [0, 1], K.ravel())
         A.assemble()
 
-    def energy(self) -> float:
-        u = self.u
-        return float(np.sum((u**2 - 1) ** 2) / 4 + self.c * (u[0] - u[1]) ** 2 / 2)
-
     def min_det(self, u: np.ndarray) -> float:
         return 1.0
 
@@ -127,45 +123,6 @@ class _DoubleWell:
 
     def length_scale(self) -> float:
         return 1.0
-
-
-@pytest.mark.fem
-@pytest.mark.parametrize("energy_merit", [False, True])
-def test_energy_merit_leaves_an_unstable_equilibrium(energy_merit: bool) -> None:
-    """Near the maximum of a double well the Newton step points uphill (the tangent is
-    negative definite). The residual rule follows it to the maximum, an unstable equilibrium;
-    with the energy merit the shifted tangent (`NewtonSolver._shifted`) goes downhill to the
-    minimum (1, 1), and every accepted step lowers E."""
-    from petsc4py import PETSc
-
-    from woundsweep.solver.newton import NewtonSolver, Policy
-
-    p = _DoubleWell([0.05, 0.05])
-    A = PETSc.Mat().createAIJ([2, 2], nnz=2)
-    A.setUp()
-    A.setValues([0, 1], [0, 1], np.ones(4))
-    A.assemble()
-    st = NewtonSettings(rtol=0.0, atol=1e-10, stol=1e-9)
-    newton = NewtonSolver(p, A, st)
-    energies: list[float] = []
-    real = newton._relax
-
-    def relax(*args: Any) -> Any:
-        out = real(*args)
-        energies.append(p.energy())
-        return out
-
-    newton._relax = relax  # type: ignore[method-assign]
-    e_start = p.energy()
-    policy = Policy(st, energy_merit=energy_merit)
-    res = newton.solve(np.zeros(0, dtype=np.int32), np.zeros(0), policy=policy)
-    assert res.status == CONVERGED
-    if energy_merit:
-        np.testing.assert_allclose(p.u, [1.0, 1.0], atol=1e-8)
-        assert energies[-1] < e_start
-        assert all(b <= a + 1e-15 for a, b in zip([e_start, *energies], energies))
-    else:
-        np.testing.assert_allclose(p.u, [0.0, 0.0], atol=1e-8)
 
 
 class _Arctan(_DoubleWell):
@@ -179,10 +136,6 @@ class _Arctan(_DoubleWell):
         A.zeroEntries()
         A.setValues([0, 1], [0, 1], np.diag(1.0 / (1.0 + self.u**2)).ravel())
         A.assemble()
-
-    def energy(self) -> float:
-        u = self.u
-        return float(np.sum(u * np.arctan(u) - 0.5 * np.log1p(u**2)))
 
 
 @pytest.mark.fem
@@ -199,7 +152,9 @@ def test_convergence_is_judged_after_a_full_newton_step() -> None:
     A.setUp()
     A.setValues([0, 1], [0, 1], np.ones(4))
     A.assemble()
-    st = NewtonSettings(rtol=0.0, atol=0.5, stol=0.5)  # met long before the root
+    # Met long before the root; an update may not grow the residual (the full steps from the
+    # start overshoot to ever larger |u|).
+    st = NewtonSettings(rtol=0.0, atol=0.5, stol=0.5, residual_growth=1.0)
     newton = NewtonSolver(p, A, st)
     steps: list[tuple[float, np.ndarray]] = []  # (gamma of the update, residual after it)
     real = newton._relax
@@ -210,7 +165,7 @@ def test_convergence_is_judged_after_a_full_newton_step() -> None:
         return out
 
     newton._relax = relax  # type: ignore[method-assign]
-    res = newton.solve(np.zeros(0, dtype=np.int32), np.zeros(0), policy=Policy(st, True))
+    res = newton.solve(np.zeros(0, dtype=np.int32), np.zeros(0), policy=Policy(st))
     assert res.status == CONVERGED
     damped = [i for i, (g, r) in enumerate(steps) if g < 1.0]
     assert damped, "the start must need damped steps"
@@ -239,9 +194,6 @@ class _Springs(_DoubleWell):
         A.zeroEntries()
         A.setValues([0, 1, 2], [0, 1, 2], self.K.ravel())
         A.assemble()
-
-    def energy(self) -> float:
-        return float(0.5 * self.u @ self.K @ self.u - self.f @ self.u)
 
     def max_strain(self, du: np.ndarray) -> float:
         return 0.0  # linear: no step-size limit

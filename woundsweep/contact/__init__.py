@@ -1,16 +1,20 @@
 """Contact of the closed wound's flanks (stages 4-6).
 
 `ContactModel` is what the wound model needs from a formulation; `FlankContact` is the
-two-pass penalty on the flanks' smooth implicit surfaces (`woundsweep.contact.smooth`).
+two-pass penalty on the flanks' smooth implicit surfaces (`woundsweep.contact.smooth`);
+`ContactMultipliers` carries its multipliers through Newton (the semi-smooth contact step,
+`woundsweep.contact.multipliers`).
 """
 
 from .geometry import orient_outward, owning_cells, split_wound_flanks
+from .multipliers import ContactMultipliers
 from .protocol import GPA_TO_KPA, ContactModel, ContactSummary
 from .smooth import FlankContact
 
 __all__ = [
     "GPA_TO_KPA",
     "ContactModel",
+    "ContactMultipliers",
     "ContactSummary",
     "FlankContact",
     "orient_outward",

@@ -28,10 +28,12 @@ class ContactModel(Protocol):
     """A penalty contact term of the potential: energy, forces and tangent at a state.
 
     ``k_V_kPa`` is the penalty (0 switches the contact terms off). The energy is C1 in ``u``
-    and its residual and tangent are exact derivatives: Newton needs no other hook.
+    and its residual and tangent are exact derivatives; ``mult`` and the two multiplier
+    methods serve the semi-smooth step (`woundsweep.contact.multipliers`).
     """
 
     k_V_kPa: float
+    mult: np.ndarray | None  # multipliers of the semi-smooth step (contact.multipliers)
     detect_time_s: float  # cumulative, since `reset_timers`
     assembly_time_s: float
     searches: int
@@ -46,6 +48,14 @@ class ContactModel(Protocol):
 
     def add_jacobian(self, A: Any, u: np.ndarray) -> None:
         """Add the contact tangent at ``u`` to an assembled PETSc matrix and re-finalise it."""
+        ...
+
+    def penalty_multipliers(self, u: np.ndarray) -> np.ndarray:
+        """mu = c psi(u) of every contact point (0 where not engaged)."""
+        ...
+
+    def linearization(self, u0: np.ndarray, du: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(c psi(u0), c dpsi . du) of every contact point (0 where not engaged at u0)."""
         ...
 
     def summary(self, u: np.ndarray) -> ContactSummary:

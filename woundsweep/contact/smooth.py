@@ -16,6 +16,9 @@ Formulation (docs/model.md, "Contact"):
 - Linearisation. Exact: residual c g dg and tangent c (dg dg^T + g d2g) of every point with
   g <= 0, c = w k_V A / h, with the derivatives of the quotient phi = N / D (at g = 0 the
   tangent of the penetrating side: touching flanks are held from the first Newton step).
+- Multipliers. With ``mult`` set (mu = c psi per point, <= 0; `woundsweep.contact.multipliers`
+  carries them through Newton), the curvature term is mu d2psi and a point with mu < 0 stays
+  engaged where its gap has opened: the semi-smooth step of the mixed form.
 
 A point sees the master facets whose centroid lies within their kernel radius (a KD-tree
 query at every new state, cheap: the kernel vanishes with two derivatives at its radius, so
@@ -78,6 +81,7 @@ class _State(NamedTuple):
     dofs: np.ndarray  # (na, L) local dofs (padded with 0)
     grad: np.ndarray  # (na, L) dpsi in local dofs (0 in padding)
     hess: np.ndarray | None  # (na, L, L) d2psi
+    index: np.ndarray  # (na,) engaged points' indices in the all-points numbering
 
 
 def _lumped(X: np.ndarray, facets: np.ndarray, nodes: np.ndarray) -> np.ndarray:
@@ -120,6 +124,11 @@ class FlankContact:
         self.nodes = np.union1d(surfs[0].nodes, surfs[1].nodes)  # every node whose position matters
         self.radius_factor = float(radius_factor)
         self.k_V_kPa = 0.0
+        self._offsets = (0, len(self.passes[0].nodes))
+        self.n_points = sum(len(ps.nodes) for ps in self.passes)
+        # The multipliers mu = c psi (<= 0) of the semi-smooth step (module docstring); None:
+        # the pure penalty, mu = c psi(u). Setting them invalidates the cached evaluations.
+        self._mult: np.ndarray | None = None
         self._cache_x: np.ndarray | None = None
         self._cache: dict[bool, _State] = {}
         self.reset_timers()
@@ -145,7 +154,9 @@ class FlankContact:
         self.searches += 1
         return q[near], f[near]
 
-    def _evaluate_pass(self, x: np.ndarray, ps: _Pass, hessian: bool) -> tuple[Any, ...]:
+    def _evaluate_pass(
+        self, x: np.ndarray, ps: _Pass, hessian: bool, off: int = 0
+    ) -> tuple[Any, ...]:
         q, f = self._pairs(x, ps)
         nq = len(ps.nodes)
         mf = ps.facets[f]
@@ -162,7 +173,10 @@ class FlankContact:
         t_sup = np.zeros(nq)
         t_sup[seen] = D[seen] / ps.support_mm2[seen]
         s_w, s_1, s_2 = support_step(t_sup)
-        act_pt = np.flatnonzero((gap <= 0.0) & (s_w > 0.0))
+        engaged = gap <= 0.0
+        if self._mult is not None:  # semi-smooth active set: compressive multipliers stay
+            engaged |= self._mult[off : off + nq] < 0.0
+        act_pt = np.flatnonzero(engaged & (s_w > 0.0) & np.isfinite(gap))
         keep = np.isin(q, act_pt)
         q, f, mf = q[keep], f[keep], mf[keep]
         if hessian:  # second derivatives only for the engaged points' pairs
@@ -223,7 +237,7 @@ class FlankContact:
             )
         dofs = (3 * node_of[:, :, None] + np.arange(3)).reshape(na, 3 * L)
         weight = TWO_PASS_WEIGHT * ps.area_mm2 / ps.size_mm
-        return gap, weight * s_w**2, psi, weight[act_pt], dofs, grad, hess
+        return gap, weight * s_w**2, psi, weight[act_pt], dofs, grad, hess, act_pt
 
     def _state(self, u: np.ndarray, hessian: bool) -> _State:
         """Gaps and derivatives at ``u`` (cached by the flank node positions; a state with the
@@ -237,7 +251,9 @@ class FlankContact:
             if key in self._cache:
                 return self._cache[key]
         t0 = time.perf_counter()
-        parts = [self._evaluate_pass(x, ps, hessian) for ps in self.passes]
+        parts = [
+            self._evaluate_pass(x, ps, hessian, off) for ps, off in zip(self.passes, self._offsets)
+        ]
         L = max(p[4].shape[1] for p in parts)
 
         def pad(a: np.ndarray, square: bool) -> np.ndarray:
@@ -254,6 +270,7 @@ class FlankContact:
             np.concatenate([pad(p[4], False) for p in parts]),
             np.concatenate([pad(p[5], False) for p in parts]),
             np.concatenate([pad(p[6], True) for p in parts]) if hessian else None,
+            np.concatenate([p[7] + off for p, off in zip(parts, self._offsets)]),
         )
         self._cache[hessian] = st
         self.evaluations += 1
@@ -281,7 +298,8 @@ class FlankContact:
         assert st.hess is not None
         t0 = time.perf_counter()
         c = self.k_V_kPa * st.weight[:, None, None]
-        K = c * (st.grad[:, :, None] * st.grad[:, None, :] + st.gap[:, None, None] * st.hess)
+        mu = c[:, 0, 0] * st.gap if self._mult is None else self._mult[st.index]
+        K = c * (st.grad[:, :, None] * st.grad[:, None, :]) + mu[:, None, None] * st.hess
         L = st.dofs.shape[1]
         rows = np.repeat(st.dofs, L, axis=1).ravel()
         cols = np.tile(st.dofs, (1, L)).ravel()
@@ -320,6 +338,34 @@ class FlankContact:
         )
         A.assemble()
         self.assembly_time_s += time.perf_counter() - t0
+
+    @property
+    def mult(self) -> np.ndarray | None:
+        """Multipliers (n_points,) in the points' order (both passes), or None."""
+        return self._mult
+
+    @mult.setter
+    def mult(self, value: np.ndarray | None) -> None:
+        self._mult = value
+        self._cache_x = None
+        self._cache.clear()
+
+    def penalty_multipliers(self, u: np.ndarray) -> np.ndarray:
+        """mu = c psi(u) of every point (0 where not engaged): the penalty's own forces."""
+        st = self._state(u, hessian=False)
+        out = np.zeros(self.n_points)
+        out[st.index] = self.k_V_kPa * st.weight * st.gap
+        return out
+
+    def linearization(self, u0: np.ndarray, du: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(c psi(u0), c dpsi . du) of every point (0 where not engaged at u0): the forces
+        the Newton model predicts at u0 + gamma du are min(0, a + gamma b)."""
+        st = self._state(u0, hessian=False)
+        a, b = np.zeros(self.n_points), np.zeros(self.n_points)
+        c = self.k_V_kPa * st.weight
+        a[st.index] = c * st.gap
+        b[st.index] = c * np.sum(st.grad * du[st.dofs], axis=1)
+        return a, b
 
     # -- reporting ------------------------------------------------------------------------------
 

@@ -3,7 +3,9 @@
 `WoundProblem` joins the compiled forms (`WoundForms`) and the flank contact (a
 `woundsweep.contact.ContactModel`, or None for an unwounded patch) into the
 `woundsweep.solver.NonlinearProblem` protocol. The contact terms are added while the
-penalty is on (``contact.k_V_kPa > 0``).
+penalty is on (``contact.k_V_kPa > 0``); ``multipliers`` are the contact multipliers Newton
+carries there. The potential is not used by Newton: that it exists (every load of stages 4-6
+is dead) makes their tangent symmetric, and `tests/test_stages_contact.py` checks R = dPi/du.
 """
 
 from __future__ import annotations
@@ -12,7 +14,7 @@ import numpy as np
 from petsc4py import PETSc
 
 from .. import compat
-from ..contact import ContactModel
+from ..contact import ContactModel, ContactMultipliers
 from .domain import WoundDomain
 from .forms import WoundForms
 
@@ -30,6 +32,10 @@ class WoundProblem:
     ) -> None:
         self.domain, self.forms, self.contact = domain, forms, contact
         self.A = compat.create_matrix(forms.a_form)
+        # Carried by Newton in the contact stages (woundsweep.contact.multipliers).
+        self.multipliers = (
+            ContactMultipliers(contact, self.solution) if contact is not None else None
+        )
 
     def _contact_on(self) -> ContactModel | None:
         c = self.contact

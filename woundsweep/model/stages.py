@@ -268,14 +268,13 @@ class WoundModel:
             offset = self.problem.residual_array()
             return self._ramp(rows, u[rows].copy(), offset, symmetric=False), {}
         k_from, k_to, load, scale = self._contact_load(stage, rows)
-        # The residual of a penetrating start holds penalty forces far above the physical
-        # ones: they must not set the convergence tolerance (a fixed force scale).
-        policy = Policy(self.settings, energy_merit=True, fixed_scale=True, symmetric=True)
+        policy = Policy.contact(self.settings)
+        # Stage 4 releases the closure and brings the penalty up four decades from the
+        # Dirichlet-closed state: half a decade first. Stages 5 and 6 start in contact
+        # equilibrium and are solved in one increment (a cut halves it if needed).
+        first = min(1.0, 0.5 / max(np.log10(k_to / k_from), 1e-9)) if stage == 4 else 1.0
         try:
-            decades = np.log10(k_to / k_from)
-            res = continuation(
-                self.newton, rows, load, scale, min(1.0, 0.5 / max(decades, 1e-9)), policy
-            )
+            res = continuation(self.newton, rows, load, scale, first, policy)
         finally:
             c.k_V_kPa = k_to
         diag: dict[str, float] = {}
@@ -344,6 +343,7 @@ class WoundModel:
         A = self.problem.A
         saved = c.k_V_kPa
         c.k_V_kPa = k_V_kPa
+        c.mult = None  # the potential's own Hessian, not a failed solve's semi-smooth tangent
         free = np.ones(A.getSize()[0], dtype=bool)
         free[rows] = False
         try:

@@ -6,13 +6,15 @@ large (its largest cellwise displacement-gradient increment exceeds ``max_strain
 it would invert an element (min J <= 0), or when the residual grows; it grows (x2, up to 1)
 after every step accepted without shrinking.
 
-With ``Policy.energy_merit`` and a problem that has a potential E (`NonlinearProblem.energy`
-not None; the contact stages, whose loads are all dead), updates are accepted by Armijo's rule
-on E instead of the residual rule, and a Newton step that does not descend E (an indefinite
-tangent: an unstable equilibrium nearby) or finds no acceptable relaxation is replaced by the
-step of the tangent with its free diagonal scaled by 1 + mu (mu = 1e-4 ... 1e4, x10, the first
-that descends; modified Newton), so every update lowers E and the iterates move toward a
-stable equilibrium (`NewtonSolver._relax`, `NewtonSolver._shifted`).
+Under ``Policy.residual_rule`` = False (the contact stages) the residual may grow: a full
+step of the semi-smooth contact Newton overshoots penalty forces it corrects at the next step,
+so only inversion and the strain limit shrink gamma there.
+
+A problem may carry variables beside u that Newton updates with each step: an attribute
+``multipliers`` (`woundsweep.contact.ContactMultipliers`, the contact stages' semi-smooth
+step) with ``reset()`` (start of a stage), ``begin()`` (start of a solve), ``predict(du)`` (at
+the current state, for u += gamma du), ``accept(prediction, gamma)``, ``snapshot()`` /
+``restore(saved)`` (a rejected relaxation) and ``commit()`` (a converged solve).
 
 Dirichlet conditions are imposed strongly by row elimination on flat dof indices: the
 constrained rows of J become identity rows and the right-hand side holds ``g - u`` there, so
@@ -22,8 +24,8 @@ symbolic factorisation is done once per matrix and only the numeric one per step
 Convergence (``stol`` is relative to the problem's length scale ``ell``):
 ``||R_free||_2 <= atol + rtol * f_scale`` and ``max |g - u| <= stol * ell`` and the last
 increment ``||du||_inf <= stol * ell``, where that last increment must be a full Newton step
-(fresh tangent, gamma = 1, no shift): a state that meets the tolerances after a damped or
-shifted update is not yet converged; Newton takes a full step from it and tests again, so a
+(fresh tangent, gamma = 1): a state that meets the tolerances after a damped update is not
+yet converged; Newton takes a full step from it and tests again, so a
 converged state is one a full, undamped step leaves within the tolerances. ``f_scale`` is
 the larger of the given force scale and the current full residual norm (reactions
 included), unless ``Policy.fixed_scale``.
@@ -50,7 +52,6 @@ __all__ = ["NewtonResult", "NewtonSolver", "NonlinearProblem", "Policy"]
 
 _log = logging.getLogger(__name__)
 LINEAR_RTOL = 1e-6  # accepted relative residual of a direct solve
-ENERGY_GAMMA_MIN = 2.0**-20  # smallest relaxation tried under the energy merit
 CONVERGED = StageStatus.CONVERGED
 MAX_ITERATIONS = StageStatus.MAX_ITERATIONS
 DIVERGED = StageStatus.DIVERGED
@@ -62,9 +63,16 @@ class Policy(NamedTuple):
     """How one stage's Newton solves are run and judged."""
 
     settings: NewtonSettings
-    energy_merit: bool = False  # accept updates by Armijo's rule on the potential
     fixed_scale: bool = False  # the force scale stays the given one (not grown by |R|)
     symmetric: bool = False  # the tangent is symmetric: LDL^T instead of LU (`NewtonSolver`)
+    residual_rule: bool = True  # reject updates that grow the residual past residual_growth
+
+    @classmethod
+    def contact(cls, settings: NewtonSettings) -> Policy:
+        """The contact stages': dead loads (a symmetric tangent, LDL^T), the force scale of
+        the stage's start (a penetrating start's penalty forces must not set the tolerance),
+        and the semi-smooth step's overshoots allowed (no residual rule)."""
+        return cls(settings, fixed_scale=True, symmetric=True, residual_rule=False)
 
 
 class NonlinearProblem(Protocol):
@@ -80,11 +88,6 @@ class NonlinearProblem(Protocol):
 
     def jacobian(self, A: PETSc.Mat) -> None:
         """Assemble dR/du into ``A`` (finalised, no boundary conditions applied)."""
-        ...
-
-    def energy(self) -> float | None:
-        """The potential (mN mm) whose gradient is R at the current state, or None when the
-        loads have none (a follower load)."""
         ...
 
     def min_det(self, u: np.ndarray) -> float:
@@ -122,7 +125,6 @@ class _Step(NamedTuple):
     r: np.ndarray
     min_det: float
     residual_time_s: float
-    factor_time_s: float
 
 
 class NewtonSolver:
@@ -147,16 +149,18 @@ class NewtonSolver:
         self._factored = False
         self._pc_kind = "lu"
         self.gamma = 1.0
-        self._mu = 0.0  # the last shift that gave a descent step (`_shifted`; see `reset`)
 
     def reset(self) -> None:
-        """Forget the adaptive state (relaxation, shift) at the start of a stage: its result
-        must not depend on what the solver did before it (earlier stages, or other jobs on a
-        reused model). A load cut resets only the relaxation: the shift that gave descent
-        steps before the cut is a good start after it (with it reset there too, the 45-degree
-        stiff cylinder of test_stages_contact ends `max-iterations`)."""
+        """Forget the adaptive state at the start of a stage (the relaxation and the carried
+        multipliers): its result must not depend on what the solver did before it (earlier
+        stages, or other jobs on a reused model)."""
         self.gamma = 1.0
-        self._mu = 0.0
+        self._hook("reset")
+
+    def _hook(self, name: str, *args: object) -> object:
+        """Call method ``name`` of the problem's carried multipliers, if it has any."""
+        m = getattr(self.problem, "multipliers", None)
+        return getattr(m, name)(*args) if m is not None else None
 
     # -- pieces ---------------------------------------------------------------------------
 
@@ -167,15 +171,6 @@ class NewtonSolver:
         if offset is not None:
             r -= offset
         return r, time.perf_counter() - t0
-
-    def _energy(self, offset: np.ndarray | None) -> float | None:
-        """Potential of ``R - offset`` at the current state, or None if there is none."""
-        e = self.problem.energy()
-        if e is None:
-            return None
-        if offset is not None:
-            e -= float(np.dot(offset, self.problem.solution()))
-        return e
 
     def _factor(self, rows: np.ndarray, rhs: np.ndarray) -> tuple[float, float]:
         """Assemble J with identity rows at ``rows`` and factorise: (assembly s, factor s).
@@ -257,6 +252,7 @@ class NewtonSolver:
         free[rows] = False
         t_asm = t_fac = t_sol = t_res = 0.0
 
+        self._hook("begin")
         r, dt = self._residual(offset)
         t_res += dt
         last_inc = math.inf
@@ -289,6 +285,7 @@ class NewtonSolver:
                 self.gamma,
             )
             if res_ok and bc_ok and full and last_inc <= st.stol * ell:
+                self._hook("commit")
                 return result(CONVERGED)
             if res_norm > st.divergence_factor * max(scale, st.atol):
                 return result(DIVERGED)
@@ -310,9 +307,11 @@ class NewtonSolver:
             if res_ok and bc_ok and du is not None:
                 # The convergence check: a full, undamped Newton step from a state that meets
                 # the tolerances must meet them again and be smaller than stol.
+                pred = self._hook("predict", du)
                 u += du
                 min_det = self.problem.min_det(u)
                 if min_det > 0:
+                    self._hook("accept", pred, 1.0)
                     r, dt = self._residual(offset)
                     t_res += dt
                     last_inc = float(np.max(np.abs(du), initial=0.0))
@@ -320,121 +319,58 @@ class NewtonSolver:
                     continue
                 u[:] = u0
             # Adaptive relaxation: limit the update size, then back off on inversion/growth.
-            prescribing = not bc_ok
-            merit = self._policy.energy_merit and not prescribing
-            e0 = self._energy(offset) if merit else None
-            if du is None and e0 is None:
+            if du is None:
                 return result(LINEAR_SOLVER_FAILED)
+            prescribing = not bc_ok
             limit = st.residual_growth * max(res_norm, st.atol + st.rtol * scale)
-            step: _Step | str = LINEAR_SOLVER_FAILED
-            if du is not None:
-                step = self._relax(u0, du, r_free, free, offset, limit, e0, prescribing)
-            shifted = False
-            if isinstance(step, str) and e0 is not None:
-                step = self._shifted(u0, rhs, r_free, free, offset, e0)
-                shifted = True
-                if not isinstance(step, str):
-                    t_fac += step.factor_time_s
+            step = self._relax(u0, du, free, offset, limit, prescribing)
             if isinstance(step, str):
                 u[:] = u0
                 return result(step)
             t_res += step.residual_time_s
             r, min_det = step.r, step.min_det
             last_inc = float(np.max(np.abs(u - u0), initial=0.0))
-            full = step.gamma == 1.0 and not shifted
+            full = step.gamma == 1.0
             self.gamma = step.gamma if step.shrunk else min(1.0, 2.0 * step.gamma)
 
     def _relax(
         self,
         u0: np.ndarray,
         du: np.ndarray,
-        r_free: np.ndarray,
         free: np.ndarray,
         offset: np.ndarray | None,
         limit: float,
-        e0: float | None,
         prescribing: bool,
     ) -> _Step | str:
         """Set u = u0 + gamma du for the largest acceptable gamma; else restore u0 and give
-        the failure status.
-
-        With a potential E (``e0`` = E(u0)) and a descent direction (dE = r . du < 0), gamma
-        is accepted by Armijo's rule E(u0 + gamma du) <= E(u0) + 1e-4 gamma dE: E is C1 where
-        R is only C0 (contact activation), so a step across many kinks that raises |R| can
-        still be taken, and a minimiser is reached where a residual rule stalls. Otherwise
-        the residual may grow by at most ``limit`` (no limit while Dirichlet values are
-        still being imposed: the load enters through them).
-        """
+        the failure status. Under `Policy.residual_rule` the residual may grow by at most
+        ``limit`` (no limit while Dirichlet values are still being imposed: the load enters
+        through them)."""
         st = self._policy.settings
         u = self.problem.solution()
+        pred = self._hook("predict", du)
         strain = self.problem.max_strain(du)
-        # Under the energy merit every step starts from gamma = 1 (Armijo backtracking).
-        start = 1.0 if e0 is not None else self.gamma
-        gamma = min(start, st.max_strain_step / strain) if strain > 0 else start
-        shrunk = gamma < start
-        slope = float(np.dot(r_free, du))
-        if e0 is not None and not slope < 0.0:
-            return DIVERGED  # uphill: the tangent is indefinite along du (`_shifted`)
-        use_energy = e0 is not None
-        g_min = ENERGY_GAMMA_MIN if use_energy else st.gamma_min
-        # Rounding of the assembled sums: a few ulps of the terms' size.
-        ulps = 64.0 * np.finfo(float).eps * abs(e0 or 0.0)
+        gamma = min(self.gamma, st.max_strain_step / strain) if strain > 0 else self.gamma
+        shrunk = gamma < self.gamma
+        check = self._policy.residual_rule and not prescribing
         why, t_res = DIVERGED, 0.0
         while True:
             u[:] = u0 + gamma * du
             det = self.problem.min_det(u)
             if det > 0:
-                e_try = self._energy(offset) if use_energy else None
-                armijo = e0 is None or e_try is None or e_try <= e0 + 1e-4 * gamma * slope + ulps
-                if armijo:
-                    r_try, dt = self._residual(offset)
-                    t_res += dt
-                    n_try = float(np.linalg.norm(np.where(free, r_try, 0.0)))
-                    if np.all(np.isfinite(r_try)) and (prescribing or use_energy or n_try <= limit):
-                        return _Step(gamma, shrunk, r_try, det, t_res, 0.0)
+                saved = self._hook("snapshot")
+                self._hook("accept", pred, gamma)
+                r_try, dt = self._residual(offset)
+                t_res += dt
+                n_try = float(np.linalg.norm(np.where(free, r_try, 0.0)))
+                if np.all(np.isfinite(r_try)) and (not check or n_try <= limit):
+                    return _Step(gamma, shrunk, r_try, det, t_res)
+                self._hook("restore", saved)
                 why = DIVERGED
             else:
                 why = INVERTED
             gamma *= 0.5
             shrunk = True
-            if gamma < g_min:
+            if gamma < st.gamma_min:
                 u[:] = u0
                 return why
-
-    def _shifted(
-        self,
-        u0: np.ndarray,
-        rhs: np.ndarray,
-        r_free: np.ndarray,
-        free: np.ndarray,
-        offset: np.ndarray | None,
-        e0: float,
-    ) -> _Step | str:
-        """Modified Newton when the Newton step is no descent of the potential (the tangent
-        is indefinite: an unstable equilibrium nearby) or finds no acceptable relaxation:
-        solve with the tangent's free diagonal scaled by 1 + mu, mu = 1e-4 ... 1e4 (x10), and
-        take the first step that lowers the potential. A large enough shift makes the matrix
-        positive definite, so the step goes downhill toward a stable equilibrium."""
-        t0 = time.perf_counter()
-        d0 = self.A.getDiagonal()
-        base = d0.getArray(readonly=True).copy()
-        extra = np.where(free, np.abs(base), 0.0)
-        mu = max(1e-4, self._mu / 10.0)
-        try:
-            while mu <= 1e4:
-                d0.getArray()[:] = base + mu * extra
-                self.A.setDiagonal(d0)
-                self.ksp.setUp()
-                self.ksp.getPC().setUp()
-                du = self._linear_solve(rhs)
-                if du is not None:
-                    step = self._relax(u0, du, r_free, free, offset, math.inf, e0, False)
-                    if not isinstance(step, str):  # a descent step, accepted by Armijo
-                        self._mu = mu
-                        _log.debug("newton: shifted tangent, mu=%.1e", mu)
-                        return step._replace(factor_time_s=time.perf_counter() - t0)
-                    self.problem.solution()[:] = u0
-                mu *= 10.0
-        except PETSc.Error:
-            return LINEAR_SOLVER_FAILED
-        return DIVERGED

@@ -89,11 +89,9 @@ def test_failures_in_a_row_end_the_stage_after_max_load_cuts() -> None:
     np.testing.assert_array_equal(newton.problem.u, 0.0)  # restored to the start
 
 
-class _DoubleWell:
-    """E(u) = sum_i (u_i^2 - 1)^2 / 4 + c (u_0 - u_1)^2 / 2: minima at u = +-(1, 1), a
-    maximum at 0 (tangent -1 + coupling). Protocol of `woundsweep.solver.NonlinearProblem`."""
-
-    c = 0.1
+class _Small:
+    """A few-dof problem of the `woundsweep.solver.NonlinearProblem` protocol; subclasses give
+    R (``_grad``) and its Jacobian."""
 
     def __init__(self, u0: list[float]) -> None:
         self.u = np.array(u0, dtype=float)
@@ -102,18 +100,10 @@ class _DoubleWell:
         return self.u
 
     def _grad(self) -> np.ndarray:
-        u = self.u
-        return u**3 - u + self.c * np.array([u[0] - u[1], u[1] - u[0]])
+        raise NotImplementedError
 
     def residual(self, b: Any) -> None:
         b.getArray()[:] = self._grad()
-
-    def jacobian(self, A: Any) -> None:
-        u, c = self.u, self.c
-        K = np.diag(3 * u**2 - 1 + c) - c * (1 - np.eye(2))
-        A.zeroEntries()
-        A.setValues([0, 1], [0, 1], K.ravel())
-        A.assemble()
 
     def min_det(self, u: np.ndarray) -> float:
         return 1.0
@@ -125,7 +115,7 @@ class _DoubleWell:
         return 1.0
 
 
-class _Arctan(_DoubleWell):
+class _Arctan(_Small):
     """R(u) = atan(u) componentwise, E = sum u atan(u) - log(1 + u^2) / 2: from |u| > 1.39
     the full Newton step overshoots, so the first updates are damped."""
 
@@ -181,7 +171,7 @@ def test_convergence_is_judged_after_a_full_newton_step() -> None:
     assert np.abs(du).max() <= st.stol
 
 
-class _Springs(_DoubleWell):
+class _Springs(_Small):
     """E = u.K u / 2 - f.u with a full SPD K: linear, so one Newton step solves it."""
 
     K = np.array([[4.0, -1.0, 0.5], [-1.0, 3.0, -0.8], [0.5, -0.8, 2.0]])

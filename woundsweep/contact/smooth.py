@@ -361,11 +361,9 @@ class FlankContact:
         """(c psi(u0), c dpsi . du) of every point (0 where not engaged at u0): the forces
         the Newton model predicts at u0 + gamma du are min(0, a + gamma b)."""
         st = self._state(u0, hessian=False)
-        a, b = np.zeros(self.n_points), np.zeros(self.n_points)
-        c = self.k_V_kPa * st.weight
-        a[st.index] = c * st.gap
-        b[st.index] = c * np.sum(st.grad * du[st.dofs], axis=1)
-        return a, b
+        b = np.zeros(self.n_points)
+        b[st.index] = self.k_V_kPa * st.weight * np.sum(st.grad * du[st.dofs], axis=1)
+        return self.penalty_multipliers(u0), b
 
     # -- reporting ------------------------------------------------------------------------------
 

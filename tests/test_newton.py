@@ -89,6 +89,20 @@ def test_failures_in_a_row_end_the_stage_after_max_load_cuts() -> None:
     np.testing.assert_array_equal(newton.problem.u, 0.0)  # restored to the start
 
 
+def test_a_path_that_needs_ever_smaller_increments_ends() -> None:
+    # Every s <= 0.3 converges in 3 steps, no s > 0.3 does: each success resets the count of
+    # failures in a row, so only the smallest increment (the first / 2**max_load_cuts) ends
+    # the approach to s = 0.3 before the stage's step budget.
+    newton, res = _run(limit=0.3, first_step=0.5)
+    ds_min = 0.5 / 2**6
+    assert res.status == MAX_ITERATIONS
+    assert 0.3 - 2 * ds_min < res.load_reached <= 0.3
+    done = [0.0] + [s for s in newton.tried if s <= 0.3]
+    gaps = [s - max(d for d in done if d < s) for s in newton.tried]
+    assert min(gaps) >= ds_min
+    assert len(newton.tried) <= 14  # without the smallest increment: until 1000 steps
+
+
 class _Small:
     """A few-dof problem of the `woundsweep.solver.NonlinearProblem` protocol; subclasses give
     R (``_grad``) and its Jacobian."""
@@ -169,6 +183,61 @@ def test_convergence_is_judged_after_a_full_newton_step() -> None:
     assert np.linalg.norm(r) <= st.atol
     du = -r * (1.0 + p.u**2)  # the full step from the returned state
     assert np.abs(du).max() <= st.stol
+
+
+class _Jump(_Small):
+    """R(u) = u + sign(u): no root, and a full Newton step from u = 1 lands on u = -1 and
+    back, the 2-cycle a semi-smooth step can fall into."""
+
+    def _grad(self) -> np.ndarray:
+        return self.u + np.sign(self.u)
+
+    def jacobian(self, A: Any) -> None:
+        A.zeroEntries()
+        A.setValues([0], [0], [1.0])
+        A.assemble()
+
+    def max_strain(self, du: np.ndarray) -> float:
+        return 0.0
+
+
+class _Cusp(_Small):
+    """R(u) = sign(u) |u|^(2/3): each full Newton step lands at -u/2, an oscillation that
+    converges (linearly), not a cycle."""
+
+    def _grad(self) -> np.ndarray:
+        return np.sign(self.u) * np.abs(self.u) ** (2.0 / 3.0)
+
+    def jacobian(self, A: Any) -> None:
+        A.zeroEntries()
+        A.setValues([0], [0], [(2.0 / 3.0) * np.abs(self.u[0]) ** (-1.0 / 3.0)])
+        A.assemble()
+
+    def max_strain(self, du: np.ndarray) -> float:
+        return 0.0
+
+
+@pytest.mark.fem
+def test_a_two_cycle_ends_the_solve_and_a_converging_oscillation_does_not() -> None:
+    from petsc4py import PETSc
+
+    from woundsweep.solver.newton import CYCLE_REPEATS, NewtonSolver, Policy
+
+    st = NewtonSettings(rtol=0.0, atol=1e-6, stol=1e-6)
+    for problem, status, steps in ((_Jump([1.0]), MAX_ITERATIONS, CYCLE_REPEATS + 1),
+                                   (_Cusp([1.0]), CONVERGED, None)):  # fmt: skip
+        A = PETSc.Mat().createAIJ([1, 1], nnz=1)
+        A.setUp()
+        A.setValues([0], [0], [1.0])
+        A.assemble()
+        res = NewtonSolver(problem, A, st).solve(
+            np.zeros(0, dtype=np.int32), np.zeros(0), force_scale=10.0, policy=Policy.contact(st)
+        )
+        assert res.status == status
+        if steps is not None:  # the cycle is seen, not the step budget (60) spent
+            assert res.iterations == steps
+        else:
+            assert abs(problem.u[0]) < 1e-8 and res.iterations > 2 * CYCLE_REPEATS
 
 
 class _Springs(_Small):

@@ -1,8 +1,8 @@
 """Load continuation: a stage's change ramped by a load factor s in [0, 1].
 
 Each increment is solved by Newton from the last converged state; the increment halves after
-a failure (up to ``max_load_cuts`` times in a row) and doubles after an easy success (at most
-4 Newton steps). A secant predictor is not used: on the wounded test patch it made two-step
+a failure (up to ``max_load_cuts`` times in a row, and not below the first increment /
+2**max_load_cuts) and doubles after an easy success (at most 4 Newton steps). A secant predictor is not used: on the wounded test patch it made two-step
 ramps worse than starting each increment from the converged state.
 """
 
@@ -59,6 +59,7 @@ def continuation(
     u = newton.problem.solution()
     s = 0.0
     ds = float(first_step) if first_step is not None else 1.0 / max(1, st.load_steps)
+    ds_min = ds / 2.0**st.max_load_cuts  # a path that needs smaller increments has ended
     cuts_in_row = cuts = its = incs = 0
     times = np.zeros(4)
     last: NewtonResult | None = None
@@ -87,7 +88,8 @@ def continuation(
         cuts += 1
         cuts_in_row += 1
         newton.gamma = 1.0
-        if cuts_in_row > st.max_load_cuts or its > st.max_stage_iterations:
+        stalled = 0.5 * (s_next - s) < ds_min
+        if cuts_in_row > st.max_load_cuts or stalled or its > st.max_stage_iterations:
             return ContinuationResult(
                 res.status, its, incs, cuts, s, res.residual_norm, res.min_det, *times
             )

@@ -31,9 +31,9 @@ the larger of the given force scale and the current full residual norm (reaction
 included), unless ``Policy.fixed_scale``.
 
 Statuses (`woundsweep.schema.StageStatus`): converged, max-iterations (the step budget, or a
-2-cycle: ``CYCLE_REPEATS`` updates in a row back on the state two updates before), diverged (non-finite or
-exploding residual, or no acceptable relaxation), inverted (every relaxation inverts an
-element), linear-solver-failed (factorisation error or non-finite solution).
+2-cycle: ``CYCLE_REPEATS`` updates in a row back on the state two updates before), diverged
+(non-finite or exploding residual, or no acceptable relaxation), inverted (every relaxation
+inverts an element), linear-solver-failed (factorisation error or non-finite solution).
 """
 
 from __future__ import annotations
@@ -311,8 +311,8 @@ class NewtonSolver:
                 t_sol += time.perf_counter() - t0
             except PETSc.Error:
                 return result(LINEAR_SOLVER_FAILED)
-            u0 = u.copy()
-            back, before = before, self._cycle_state(u0)
+            back, before = before, self._cycle_state(u)
+            u0 = before[0]
             if res_ok and bc_ok and du is not None:
                 # The convergence check: a full, undamped Newton step from a state that meets
                 # the tolerances must meet them again and be smaller than stol.

@@ -3,13 +3,15 @@
 `ContactModel` is what the wound model needs from a formulation; `FlankContact` is the
 two-pass penalty on the flanks' smooth implicit surfaces (`woundsweep.contact.smooth`);
 `ContactMultipliers` carries its multipliers through Newton (the semi-smooth contact step,
-`woundsweep.contact.multipliers`).
+`woundsweep.contact.multipliers`); `ZoneTie` ties the closure zone's flanks tangentially
+(`woundsweep.contact.tie`).
 """
 
 from .geometry import orient_outward, owning_cells, split_wound_flanks
 from .multipliers import ContactMultipliers
 from .protocol import GPA_TO_KPA, ContactModel, ContactSummary
 from .smooth import FlankContact
+from .tie import ZoneTie
 
 __all__ = [
     "GPA_TO_KPA",
@@ -17,6 +19,7 @@ __all__ = [
     "ContactMultipliers",
     "ContactSummary",
     "FlankContact",
+    "ZoneTie",
     "orient_outward",
     "owning_cells",
     "split_wound_flanks",

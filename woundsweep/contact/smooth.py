@@ -35,7 +35,7 @@ from scipy.spatial import cKDTree
 
 from .implicit import pair_terms
 from .protocol import ContactSummary
-from .surfaces import surface
+from .surfaces import lumped_area, surface
 
 __all__ = ["TWO_PASS_WEIGHT", "FlankContact"]
 
@@ -84,14 +84,6 @@ class _State(NamedTuple):
     index: np.ndarray  # (na,) engaged points' indices in the all-points numbering
 
 
-def _lumped(X: np.ndarray, facets: np.ndarray, nodes: np.ndarray) -> np.ndarray:
-    """A third of the reference area of the facets around each of ``nodes``."""
-    p = X[facets]
-    area = 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
-    per_node = np.bincount(facets.ravel(), weights=np.repeat(area / 3.0, 3), minlength=len(X))
-    return per_node[nodes]
-
-
 class FlankContact:
     """Two-pass penalty between two surfaces on their implicit surfaces (module docstring).
 
@@ -117,7 +109,7 @@ class FlankContact:
             rho = radius_factor * np.sqrt(4.0 * m_area / np.sqrt(3.0))
             size = sl.size_mm[keep]
             passes.append(
-                _Pass(sl.nodes[keep], _lumped(self.X, sl.facets, sl.nodes[keep]), size,
+                _Pass(sl.nodes[keep], lumped_area(self.X, sl.facets, sl.nodes[keep]), size,
                       ms.facets, rho, np.pi * (radius_factor * size) ** 2 / 4.0)
             )  # fmt: skip
         self.passes = tuple(passes)

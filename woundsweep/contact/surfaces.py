@@ -6,7 +6,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-__all__ = ["Surface", "surface"]
+__all__ = ["Surface", "lumped_area", "surface"]
 
 
 class Surface(NamedTuple):
@@ -26,3 +26,11 @@ def surface(X: np.ndarray, facets: np.ndarray) -> Surface:
     count = np.bincount(inv, minlength=len(nodes))
     size = np.sqrt(4.0 * (tri_area / count) / np.sqrt(3.0))  # side of the equilateral triangle
     return Surface(facets, nodes, size)
+
+
+def lumped_area(X: np.ndarray, facets: np.ndarray, nodes: np.ndarray) -> np.ndarray:
+    """A third of the reference area of the facets around each of ``nodes`` (mm^2)."""
+    p = X[facets]
+    area = 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
+    per_node = np.bincount(facets.ravel(), weights=np.repeat(area / 3.0, 3), minlength=len(X))
+    return per_node[nodes]

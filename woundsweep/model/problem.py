@@ -1,9 +1,10 @@
 """The nonlinear problem Newton solves: the wound model's residual, tangent and potential.
 
-`WoundProblem` joins the compiled forms (`WoundForms`) and the flank contact (a
-`woundsweep.contact.ContactModel`, or None for an unwounded patch) into the
-`woundsweep.solver.NonlinearProblem` protocol. The contact terms are added while the
-penalty is on (``contact.k_V_kPa > 0``); ``multipliers`` are the contact multipliers Newton
+`WoundProblem` joins the compiled forms (`WoundForms`), the flank contact (a
+`woundsweep.contact.ContactModel`, or None for an unwounded patch) and the closure zone's
+tangential tie (`woundsweep.contact.ZoneTie`) into the `woundsweep.solver.NonlinearProblem`
+protocol. The contact and tie terms are added while the penalty is on
+(``contact.k_V_kPa > 0``; the tie only once set); ``multipliers`` are the contact multipliers Newton
 carries there. The potential is not used by Newton: that it exists (every load of stages 4-6
 is dead) makes their tangent symmetric, and `tests/test_stages_contact.py` checks R = dPi/du.
 """
@@ -14,7 +15,7 @@ import numpy as np
 from petsc4py import PETSc
 
 from .. import compat
-from ..contact import ContactModel, ContactMultipliers
+from ..contact import ContactModel, ContactMultipliers, ZoneTie
 from .domain import WoundDomain
 from .forms import WoundForms
 
@@ -29,8 +30,9 @@ class WoundProblem:
         domain: WoundDomain,
         forms: WoundForms,
         contact: ContactModel | None,
+        tie: ZoneTie | None = None,
     ) -> None:
-        self.domain, self.forms, self.contact = domain, forms, contact
+        self.domain, self.forms, self.contact, self.tie = domain, forms, contact, tie
         self.A = compat.create_matrix(forms.a_form)
         # Carried by Newton in the contact stages (woundsweep.contact.multipliers).
         self.multipliers = (
@@ -51,12 +53,16 @@ class WoundProblem:
         c = self._contact_on()
         if c is not None:
             c.add_residual(b, self.solution())
+            if self.tie is not None:
+                self.tie.add_residual(b, self.solution(), c.k_V_kPa)
 
     def jacobian(self, A: PETSc.Mat) -> None:
         compat.assemble_matrix(A, self.forms.a_form)
         c = self._contact_on()
         if c is not None:
             c.add_jacobian(A, self.solution())
+            if self.tie is not None:
+                self.tie.add_jacobian(A, c.k_V_kPa)
 
     def energy(self) -> float | None:
         """Total potential (mN mm) at the current state, or None while a load follows the
@@ -67,6 +73,8 @@ class WoundProblem:
         c = self._contact_on()
         if c is not None:
             e += c.energy(self.solution())
+            if self.tie is not None:
+                e += self.tie.energy(self.solution(), c.k_V_kPa)
         return e
 
     def min_det(self, u: np.ndarray) -> float:

@@ -24,7 +24,7 @@ from typing import Any, NamedTuple
 import numpy as np
 import scipy.sparse
 
-from ..contact import GPA_TO_KPA, ContactModel, FlankContact, split_wound_flanks
+from ..contact import GPA_TO_KPA, ContactModel, FlankContact, ZoneTie, split_wound_flanks
 from ..schema import DERMIS, STAGES, SUBCUTIS, StageStatus
 from ..solver.continuation import ContinuationResult, LoadState, continuation
 from ..solver.newton import NewtonSolver, Policy
@@ -72,11 +72,13 @@ class WoundModel:
         self.contact_penalty_kPa = tuple(float(k) * GPA_TO_KPA for k in contact_penalty_GPa)
         self.domain = d = WoundDomain(mesh_data, zone)
         self.contact: ContactModel | None = None
+        self.tie: ZoneTie | None = None
         if d.has_wound:
             left, right = split_wound_flanks(d.X, d.cell_nodes, d.wound_facets(), d.x_c)
             self.contact = FlankContact(d.X, left, right)
+            self.tie = ZoneTie(d.X, d.zone_left_nodes, d.zone_right_nodes, left, d.x_c)
         self.forms = WoundForms(d, quadrature_degree, jit)
-        self.problem = WoundProblem(d, self.forms, self.contact)
+        self.problem = WoundProblem(d, self.forms, self.contact, self.tie)
         self.newton = NewtonSolver(self.problem, self.problem.A, settings or NewtonSettings())
         self.materials: JobMaterials | None = None
         self.homogeneous: dict[int, HomogeneousState] = {}
@@ -114,6 +116,8 @@ class WoundModel:
         self.closure_force_mN = (0.0, 0.0)
         if self.contact is not None:
             self.contact.k_V_kPa = 0.0
+        if self.tie is not None:
+            self.tie.release()
         self.u[:] = 0.0
         self.results.clear()
         self.displacements.clear()
@@ -286,6 +290,9 @@ class WoundModel:
         diag["closure_gap_mm"] = self.closure_gap()
         diag["pin_reaction_max_mN"] = self._pin_reaction(r)
         diag["contact_penalty_kPa"] = c.k_V_kPa
+        if self.tie is not None:
+            diag["tie_force_mN"] = self.tie.force_mN(u, c.k_V_kPa)
+            diag["tie_max_slip_mm"] = float(np.max(np.abs(self.tie.slip(u)), initial=0.0))
         detect, assemble, searches = c.detect_time_s, c.assembly_time_s, c.searches
         summ = c.summary(u)
         diag.update(
@@ -317,6 +324,8 @@ class WoundModel:
             # The closure traction becomes a dead load on the stage-2 area (docs/model.md).
             self.forms.u_area.x.array[:] = self.displacements[2]
             self.forms.follow.value = 0.0
+            if self.tie is not None:  # the closed zone is tied where stage 2 closed it
+                self.tie.set_reference(u)
         c.reset_timers()
         # Out-of-balance force released over the stage: stage 4, that of the stage-2 state
         # under the stage-3 loads (contact off); stages 5 and 6 start from an equilibrium

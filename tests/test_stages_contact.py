@@ -102,6 +102,56 @@ def test_contact_at_45_degrees(cylinder_mesh) -> None:
     assert abs(np.mean(uy[left]) - np.mean(uy[right])) > 1e-4
 
 
+def test_the_zone_tie_is_inert_at_0_degrees(cylinder_mesh) -> None:
+    """Mirror symmetry: the tie carries no force, and stages 4-6 are those of the untied
+    model."""
+    m, outs = _run(cylinder_mesh, 0.0)
+    assert m.tie is not None and len(m.tie) > 0
+    assert all(o.diagnostics["tie_force_mN"] < 1e-9 * o.diagnostics["contact_force_mN"]
+               for o in outs[3:])  # fmt: skip
+    from woundsweep.model.materials import JobMaterials
+    from woundsweep.model.stages import WoundModel
+
+    free = WoundModel(cylinder_mesh)
+    free.problem.tie = None
+    free.set_materials(JobMaterials.table2("stiff", 0.0))
+    outs_free = [free.run_stage(k) for k in range(1, 7)]
+    assert [o.solve.status for o in outs_free] == [CONVERGED] * 6
+    scale = float(np.abs(m.u).max())
+    assert float(np.abs(m.u - free.u).max()) < 1e-9 * scale
+
+
+def test_the_zone_tie_holds_the_flanks_at_45_degrees(cylinder_mesh) -> None:
+    """At 45 degrees the tie carries force, its slip stays at the penalty's scale, and the
+    stage's potential (tie included) is that of its residual."""
+    m, outs = _run(cylinder_mesh, 45.0)
+    assert [o.solve.status for o in outs] == [CONVERGED] * 6
+    d6 = outs[5].diagnostics
+    assert d6["tie_force_mN"] > 1e-3 * d6["contact_force_mN"]
+    h = float(np.min(m.contact.passes[0].size_mm))
+    assert d6["tie_max_slip_mm"] < 0.01 * h
+    # Slip falls as the penalty rises (stages 4 -> 6: k_V 1 -> 100 GPa).
+    assert outs[5].diagnostics["tie_max_slip_mm"] < 0.1 * outs[3].diagnostics["tie_max_slip_mm"]
+    u = m.u
+    u6 = u.copy()
+    rng = np.random.default_rng(4)
+    free = np.ones(len(u), dtype=bool)
+    free[m.domain.gauge_rows()] = False
+    v = np.zeros(len(u))
+    v[3 * m.tie.pairs[:, 0] + 1] = 1.0  # slide the zone's left flank along y
+    v += 0.1 * np.where(free, rng.standard_normal(len(u)), 0.0)
+    u0 = u6 + 1e-5 * v
+    u[:] = u0
+    R = m.problem.residual_array()
+    eps = 1e-7
+    u[:] = u0 + eps * v
+    e_plus = m.problem.energy()
+    u[:] = u0 - eps * v
+    e_minus = m.problem.energy()
+    u[:] = u6
+    assert (e_plus - e_minus) / (2 * eps) == pytest.approx(float(R @ v), rel=1e-4)
+
+
 def test_unconverged_contact_stage_is_recorded_as_such(cylinder_mesh) -> None:
     from woundsweep.model.job import run_stages
     from woundsweep.model.materials import JobMaterials

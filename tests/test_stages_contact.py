@@ -43,6 +43,18 @@ def _flank_nodes(m) -> tuple[np.ndarray, np.ndarray]:
     return left.nodes, right.nodes
 
 
+def _energy_slope(m, u0: np.ndarray, v: np.ndarray, eps: float):
+    """(central difference of the potential along v at u0, R(u0)); leaves u perturbed."""
+    u = m.u
+    u[:] = u0
+    R = m.problem.residual_array()
+    u[:] = u0 + eps * v
+    e_plus = m.problem.energy()
+    u[:] = u0 - eps * v
+    e_minus = m.problem.energy()
+    return (e_plus - e_minus) / (2 * eps), R
+
+
 def _run(mesh, angle: float, skin: str = "stiff"):
     from woundsweep.model.materials import JobMaterials
     from woundsweep.model.stages import WoundModel
@@ -140,16 +152,9 @@ def test_the_zone_tie_holds_the_flanks_at_45_degrees(cylinder_mesh) -> None:
     v = np.zeros(len(u))
     v[3 * m.tie.pairs[:, 0] + 1] = 1.0  # slide the zone's left flank along y
     v += 0.1 * np.where(free, rng.standard_normal(len(u)), 0.0)
-    u0 = u6 + 1e-5 * v
-    u[:] = u0
-    R = m.problem.residual_array()
-    eps = 1e-7
-    u[:] = u0 + eps * v
-    e_plus = m.problem.energy()
-    u[:] = u0 - eps * v
-    e_minus = m.problem.energy()
+    fd, R = _energy_slope(m, u6 + 1e-5 * v, v, 1e-7)
     u[:] = u6
-    assert (e_plus - e_minus) / (2 * eps) == pytest.approx(float(R @ v), rel=1e-4)
+    assert fd == pytest.approx(float(R @ v), rel=1e-4)
 
 
 def test_unconverged_contact_stage_is_recorded_as_such(cylinder_mesh) -> None:
@@ -241,16 +246,8 @@ def test_contact_stage_potential_is_that_of_the_residual(cylinder_mesh) -> None:
     free[m.domain.gauge_rows()] = False
     w = np.where(free, rng.standard_normal(len(u)), 0.0)
     v = np.where(free, rng.standard_normal(len(u)), 0.0)
-    u0 = u4 + 1e-4 * w
-    u[:] = u0
-    R = m.problem.residual_array()
-    eps = 1e-6
-    u[:] = u0 + eps * v
-    e_plus = m.problem.energy()
-    u[:] = u0 - eps * v
-    e_minus = m.problem.energy()
+    fd, R = _energy_slope(m, u4 + 1e-4 * w, v, 1e-6)
     u[:] = u4
-    fd = (e_plus - e_minus) / (2 * eps)
     assert abs(R @ v) > 1e-3 * np.linalg.norm(R) * np.linalg.norm(v) / np.sqrt(len(v))
     assert fd == pytest.approx(float(R @ v), rel=1e-5)
 

@@ -10,7 +10,7 @@ from typing import Any, NamedTuple, Protocol
 
 import numpy as np
 
-__all__ = ["GPA_TO_KPA", "ContactModel", "ContactSummary"]
+__all__ = ["GPA_TO_KPA", "ContactModel", "ContactSummary", "add_csr"]
 
 GPA_TO_KPA = 1.0e6  # stiffness in GPa -> kPa
 
@@ -65,3 +65,20 @@ class ContactModel(Protocol):
     def reset_timers(self) -> None:
         """Zero the time and search counters."""
         ...
+
+
+def add_csr(A: Any, K: Any) -> None:
+    """Add the scipy CSR matrix ``K`` to the assembled PETSc matrix ``A`` and re-finalise it.
+
+    Contact terms couple nodes across the wound that the finite-element pattern does not, so
+    new nonzeros are allowed."""
+    from petsc4py import PETSc
+
+    A.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
+    A.setValuesCSR(
+        K.indptr.astype(PETSc.IntType),
+        K.indices.astype(PETSc.IntType),
+        K.data.astype(PETSc.ScalarType),
+        addv=PETSc.InsertMode.ADD_VALUES,
+    )
+    A.assemble()

@@ -34,7 +34,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from .implicit import pair_terms
-from .protocol import ContactSummary
+from .protocol import ContactSummary, add_csr
 from .surfaces import lumped_area, surface
 
 __all__ = ["TWO_PASS_WEIGHT", "FlankContact"]
@@ -315,20 +315,11 @@ class FlankContact:
         """
         if self.k_V_kPa <= 0.0:
             return
-        from petsc4py import PETSc
-
         K = self.tangent_csr(u)
         if K.nnz == 0:
             return
         t0 = time.perf_counter()
-        A.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
-        A.setValuesCSR(
-            K.indptr.astype(PETSc.IntType),
-            K.indices.astype(PETSc.IntType),
-            K.data.astype(PETSc.ScalarType),
-            addv=PETSc.InsertMode.ADD_VALUES,
-        )
-        A.assemble()
+        add_csr(A, K)
         self.assembly_time_s += time.perf_counter() - t0
 
     @property

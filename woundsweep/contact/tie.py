@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 from scipy.spatial import cKDTree
 
+from .protocol import add_csr
 from .surfaces import lumped_area, surface
 
 __all__ = ["ZoneTie"]
@@ -70,6 +71,7 @@ class ZoneTie:
             at = np.searchsorted(flank.nodes, left)
             self.weight = lumped_area(X, flank.facets, left) / flank.size_mm[at]  # A_p / h_p
         self._dofs = np.concatenate([3 * self.pairs + k for k in (1, 2)], axis=0)  # (2p, 2)
+        self._w = np.tile(self.weight, 2)  # A_p / h_p per row of _dofs
         self._s0: np.ndarray | None = None
         self._unit: Any = None  # the tangent for k_V = 1, built once
 
@@ -92,31 +94,26 @@ class ZoneTie:
     def active(self) -> bool:
         return self._s0 is not None and len(self.pairs) > 0
 
+    def _slip_rows(self, u: np.ndarray) -> np.ndarray:
+        """Slip per row of ``_dofs`` (the y components, then the z ones); zeros while untied."""
+        if not self.active:
+            return np.zeros(len(self._dofs))
+        return self._raw(u) - self._s0
+
     def slip(self, u: np.ndarray) -> np.ndarray:
         """Slip (mm) of every pair, (p, 2): y and z components (zeros while untied)."""
-        if not self.active:
-            return np.zeros((len(self.pairs), 2))
-        assert self._s0 is not None
-        return (self._raw(u) - self._s0).reshape(2, -1).T
-
-    def _c(self, k_V_kPa: float) -> np.ndarray:
-        return k_V_kPa * np.tile(self.weight, 2)
+        return self._slip_rows(u).reshape(2, -1).T
 
     def energy(self, u: np.ndarray, k_V_kPa: float) -> float:
         """Tie energy (mN mm)."""
-        if not self.active:
-            return 0.0
-        s = self._raw(u) - self._s0
-        return float(0.5 * np.sum(self._c(k_V_kPa) * s**2))
+        return float(0.5 * k_V_kPa * np.sum(self._w * self._slip_rows(u) ** 2))
 
     def force_vector(self, u: np.ndarray, k_V_kPa: float) -> np.ndarray:
         """dPi_t/du (flat, mN)."""
         out = np.zeros(self.n_dofs)
-        if not self.active:
-            return out
-        f = self._c(k_V_kPa) * (self._raw(u) - self._s0)
-        np.add.at(out, self._dofs[:, 0], f)
-        np.add.at(out, self._dofs[:, 1], -f)
+        f = k_V_kPa * self._w * self._slip_rows(u)
+        out[self._dofs[:, 0]] += f  # each dof appears once: a node has one mirror image
+        out[self._dofs[:, 1]] -= f
         return out
 
     def tangent_csr(self, k_V_kPa: float) -> Any:
@@ -124,8 +121,7 @@ class ZoneTie:
         import scipy.sparse
 
         if self._unit is None:
-            a, b = self._dofs[:, 0], self._dofs[:, 1]
-            w = np.tile(self.weight, 2)
+            a, b, w = self._dofs[:, 0], self._dofs[:, 1], self._w
             rows = np.concatenate([a, b, a, b])
             cols = np.concatenate([a, b, b, a])
             vals = np.concatenate([w, w, -w, -w])
@@ -141,19 +137,8 @@ class ZoneTie:
 
     def add_jacobian(self, A: Any, k_V_kPa: float) -> None:
         """Add the tie tangent to an assembled PETSc matrix ``A`` and re-finalise it."""
-        if not (self.active and k_V_kPa > 0):
-            return
-        from petsc4py import PETSc
-
-        K = self.tangent_csr(k_V_kPa)
-        A.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
-        A.setValuesCSR(
-            K.indptr.astype(PETSc.IntType),
-            K.indices.astype(PETSc.IntType),
-            K.data.astype(PETSc.ScalarType),
-            addv=PETSc.InsertMode.ADD_VALUES,
-        )
-        A.assemble()
+        if self.active and k_V_kPa > 0:
+            add_csr(A, self.tangent_csr(k_V_kPa))
 
     def force_mN(self, u: np.ndarray, k_V_kPa: float) -> float:
         """Total tangential tie force, sum over pairs of |c_p s_p| (mN)."""

@@ -276,3 +276,25 @@ def test_contact_stages_5_and_6_start_in_equilibrium(cylinder_mesh) -> None:
         assert np.linalg.norm(contact) > 1e-3 * scale  # the contact forces are there ...
         assert np.linalg.norm(r) <= 1e-12 * scale  # ... and balanced at s = 0
         assert m.run_stage(stage).solve.status == CONVERGED
+
+
+def test_stage_4_starts_from_a_stable_state_on_an_overlapping_wedge() -> None:
+    """Paper job 8652's geometry (a 0-degree wedge, width 3, depth 1.5): its Dirichlet-closed
+    lower flanks overlap, and at a penalty of 100 kPa the contact's curvature term makes the
+    stage-4 starting state a saddle of the potential (Newton never left it). At the starting
+    penalty the free-dof Hessian there is positive definite."""
+    from woundsweep.mesh.build import build_mesh
+    from woundsweep.mesh.spec import GeometrySpec
+    from woundsweep.model.materials import JobMaterials
+    from woundsweep.model.stages import CONTACT_START_kPa, WoundModel
+
+    m = WoundModel(build_mesh(GeometrySpec.wedge(1.0, 2.0, 6.0, 3.0, 1.5, 0.7)))
+    m.set_materials(JobMaterials.table2("stiff", 0.0))
+    for stage in (1, 2, 3):
+        assert m.run_stage(stage).solve.status == CONVERGED
+    rows = m.domain.gauge_rows()
+    m._contact_load(4, rows)  # the stage-4 start: the stage-2 state, dead closure load
+    np.testing.assert_array_equal(m.u, m.displacements[2])
+    eig_start = m._stability(rows, CONTACT_START_kPa)["stability_min_eig_mN_per_mm"]
+    eig_100 = m._stability(rows, 100.0)["stability_min_eig_mN_per_mm"]
+    assert eig_start > 0.0 > eig_100

@@ -38,7 +38,7 @@ from .stability import lowest_eigenvalues
 
 __all__ = ["CONTACT_START_kPa", "StageOutcome", "WoundModel"]
 
-CONTACT_START_kPa = 100.0  # stage 4's penalty ramp starts here: a soft-tissue modulus
+CONTACT_START_kPa = 1.0  # stage 4's penalty ramp starts here: far below the tissue moduli
 
 
 class StageOutcome(NamedTuple):
@@ -273,7 +273,7 @@ class WoundModel:
             return self._ramp(rows, u[rows].copy(), offset, symmetric=False), {}
         k_from, k_to, load, scale = self._contact_load(stage, rows)
         policy = Policy.contact(self.settings)
-        # Stage 4 releases the closure and brings the penalty up four decades from the
+        # Stage 4 releases the closure and brings the penalty up six decades from the
         # Dirichlet-closed state: half a decade first. Stages 5 and 6 start in contact
         # equilibrium and are solved in one increment (a cut halves it if needed).
         first = min(1.0, 0.5 / max(np.log10(k_to / k_from), 1e-9)) if stage == 4 else 1.0

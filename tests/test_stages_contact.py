@@ -281,7 +281,7 @@ def test_contact_stages_5_and_6_start_in_equilibrium(cylinder_mesh) -> None:
 def test_stage_4_starts_from_a_stable_state_on_an_overlapping_wedge() -> None:
     """Paper job 8652's geometry (a 0-degree wedge, width 3, depth 1.5): its Dirichlet-closed
     lower flanks overlap, and at a penalty of 100 kPa the contact's curvature term makes the
-    stage-4 starting state a saddle of the potential (Newton never left it). At the starting
+    stage-4 starting state a saddle of the potential (Newton cycled there). At the starting
     penalty the free-dof Hessian there is positive definite."""
     from woundsweep.mesh.build import build_mesh
     from woundsweep.mesh.spec import GeometrySpec

@@ -273,8 +273,8 @@ class WoundModel:
             return self._ramp(rows, u[rows].copy(), offset, symmetric=False), {}
         k_from, k_to, load, scale = self._contact_load(stage, rows)
         policy = Policy.contact(self.settings)
-        # Stage 4 releases the closure and brings the penalty up six decades from the
-        # Dirichlet-closed state: half a decade first. Stages 5 and 6 start in contact
+        # Stage 4 releases the closure and brings the penalty up from CONTACT_START_kPa at the
+        # Dirichlet-closed state (six decades to 1 GPa): half a decade first. Stages 5 and 6 start in contact
         # equilibrium and are solved in one increment (a cut halves it if needed).
         first = min(1.0, 0.5 / max(np.log10(k_to / k_from), 1e-9)) if stage == 4 else 1.0
         try:

@@ -185,6 +185,59 @@ def test_convergence_is_judged_after_a_full_newton_step() -> None:
     assert np.abs(du).max() <= st.stol
 
 
+@pytest.mark.fem
+def test_an_intermediate_increment_stops_at_the_path_tolerance() -> None:
+    """Under ``Policy.path`` (a state inside a load ramp) a solve ends as soon as the
+    residual meets path_rtol, without the full-step test; the same solve without it goes on
+    to rtol and a full step of size below stol."""
+    from petsc4py import PETSc
+
+    from woundsweep.solver.newton import NewtonSolver, Policy
+
+    st = NewtonSettings(rtol=1e-10, atol=0.0, stol=1e-10, path_rtol=1e-2)
+    counts = {}
+    for path in (True, False):
+        p = _Arctan([1.0, -0.5])
+        A = PETSc.Mat().createAIJ([2, 2], nnz=2)
+        A.setUp()
+        A.setValues([0, 1], [0, 1], np.ones(4))
+        A.assemble()
+        newton = NewtonSolver(p, A, st)
+        res = newton.solve(
+            np.zeros(0, dtype=np.int32), np.zeros(0), force_scale=1.0, policy=Policy(st, path=path)
+        )
+        assert res.status == CONVERGED
+        r = float(np.linalg.norm(np.arctan(p.u)))
+        if path:
+            assert st.rtol < r <= st.path_rtol  # stopped at the path tolerance, not beyond
+        else:
+            assert r <= st.rtol
+        counts[path] = res.iterations
+    assert counts[True] < counts[False]
+
+
+def test_only_the_end_of_a_ramp_is_solved_to_the_full_tolerance() -> None:
+    """Continuation solves every increment before s = 1 under the path policy, the last
+    without it."""
+    newton = _ScriptedNewton(1.0, NewtonSettings())
+    seen: list[tuple[float, bool]] = []
+    real = newton.solve
+
+    def solve(rows: Any, values: Any, offset: Any, force_scale: float, policy: Any = None) -> Any:
+        seen.append((newton.s, bool(policy.path)))
+        return real(rows, values, offset, force_scale, policy)
+
+    newton.solve = solve  # type: ignore[method-assign]
+
+    def load(s: float) -> LoadState:
+        newton.s = s
+        return LoadState(np.zeros(0), None)
+
+    res = continuation(newton, np.zeros(0, dtype=np.int32), load, first_step=0.25)  # type: ignore[arg-type]
+    assert res.status == CONVERGED
+    assert seen == [(0.25, True), (0.75, True), (1.0, False)]
+
+
 class _Jump(_Small):
     """R(u) = u + sign(u): no root, and a full Newton step from u = 1 lands on u = -1 and
     back, the 2-cycle a semi-smooth step can fall into."""

@@ -120,6 +120,20 @@ def test_unwounded_stage2_reproduces_stage1(box_model, skin: str, angle: float) 
 
 
 @pytest.mark.parametrize("skin", SKIN_TYPES)
+def test_stage1_starts_from_the_unwounded_solution(box_model, skin: str) -> None:
+    """Stage 1's Newton start is the per-layer homogeneous state, which solves the unwounded
+    patch exactly: one Newton step (the full-step convergence check) is all it takes."""
+    from woundsweep.model.materials import JobMaterials
+
+    m = box_model
+    m.set_materials(JobMaterials.table2(skin, 0.0))
+    start = m._pretension_state()[m.domain.input_node]
+    assert rel_l2(start, homogeneous_field(m.domain.points, skin, 0.0)) < 1e-12
+    out = m.run_stage(1)
+    assert out.solve.status == "converged" and out.solve.iterations == 1
+
+
+@pytest.mark.parametrize("skin", SKIN_TYPES)
 def test_unwounded_oblique_orientation(box_model, skin: str) -> None:
     """At 45 degrees the healthy-skin traction has shear (P_xy != 0). Stage 2 applies it and
     gives the homogeneous state; stage 1's lateral faces are shear-free while its deep face is
@@ -275,7 +289,8 @@ def test_unconverged_stage_stops_later_stages(box_model) -> None:
         m.newton = NewtonSolver(
             m.problem, m.problem.A, NewtonSettings(max_iterations=1, max_load_cuts=1)
         )
-        recs = run_stages(m, JobMaterials.table2("soft", 0.0), 3)
+        # At 45 degrees stage 1's start (the homogeneous state) is not its solution.
+        recs = run_stages(m, JobMaterials.table2("soft", 45.0), 3)
     finally:
         m.newton = saved
     assert [r.result.status for r in recs] == ["max-iterations", "not-run", "not-run"]
@@ -319,9 +334,11 @@ def test_stage_iteration_budget_ends_a_long_continuation(box_model) -> None:
     m = box_model
     saved = m.newton
     try:
-        st = NewtonSettings(load_steps=4, max_stage_iterations=2)
+        # Every increment solved to the full tolerance (path_rtol 0), and at 45 degrees, where
+        # stage 1's start is not its solution.
+        st = NewtonSettings(load_steps=4, max_stage_iterations=2, path_rtol=0.0)
         m.newton = NewtonSolver(m.problem, m.problem.A, st)
-        m.set_materials(JobMaterials.table2("soft", 0.0))
+        m.set_materials(JobMaterials.table2("soft", 45.0))
         out = m.run_stage(1)
     finally:
         m.newton = saved

@@ -208,8 +208,32 @@ class WoundModel:
         r, first = np.unique(r, return_index=True)
         t = t[first]
         self.forms.set_loads(0.0, 0.0, 0.0)
+        # Newton starts from the unwounded patch's solution, which meets these conditions
+        # exactly: it corrects only the disturbance of the wound.
+        self.u[:] = self._pretension_state().ravel()
         res = self._ramp(r, t, None)
         return res, {"closure_gap_mm": self.closure_gap()}
+
+    def _pretension_state(self) -> np.ndarray:
+        """Nodal displacements (n, 3) of the unwounded two-layer patch under stage 1's
+        conditions: each layer at its homogeneous state F = diag(s, s, lambda3) (traction-free
+        top and interface), u_z = 0 on the deep face and continuous across the layers."""
+        d = self.domain
+        X = d.X
+        s = self.materials.tsf if self.materials is not None else 1.0
+        sub_nodes = np.unique(d.cell_nodes[d.cell_tags[d.cell_input] == SUBCUTIS])
+        z_bottom = float(X[:, 2].min())
+        z_int = float(X[sub_nodes, 2].max()) if len(sub_nodes) else z_bottom
+        lam_sub = self.homogeneous[SUBCUTIS].lambda3
+        lam_der = self.homogeneous[DERMIS].lambda3
+        z = X[:, 2]
+        u = np.empty_like(X)
+        u[:, 0] = (s - 1.0) * (X[:, 0] - d.x_c)
+        u[:, 1] = (s - 1.0) * (X[:, 1] - d.y_c)
+        u[:, 2] = (lam_sub - 1.0) * (np.minimum(z, z_int) - z_bottom) + (lam_der - 1.0) * (
+            np.maximum(z - z_int, 0.0)
+        )
+        return u
 
     def _stage2(self) -> tuple[ContinuationResult, dict[str, float]]:
         """Healthy-skin traction on the lateral faces (eqs. 15-16) and Dirichlet closure

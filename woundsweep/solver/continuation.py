@@ -69,7 +69,9 @@ def continuation(
         s_next = min(1.0, s + ds)
         u_saved = u.copy()
         state = load(s_next)
-        res = newton.solve(rows, state.values, state.offset, force_scale, policy)
+        # Only the stage's end (s = 1) is a result; the states before it only carry the path.
+        step_policy = policy if s_next >= 1.0 else policy._replace(path=True)
+        res = newton.solve(rows, state.values, state.offset, force_scale, step_policy)
         last = res
         its += res.iterations
         times += (res.assembly_time_s, res.factor_time_s, res.solve_time_s, res.residual_time_s)

@@ -72,6 +72,9 @@ class Policy(NamedTuple):
     fixed_scale: bool = False  # the force scale stays the given one (not grown by |R|)
     symmetric: bool = False  # the tangent is symmetric: LDL^T instead of LU (`NewtonSolver`)
     residual_rule: bool = True  # reject updates that grow the residual past residual_growth
+    # An intermediate state of a load ramp: converged once the residual meets path_rtol (and
+    # the Dirichlet values stol), without the full-step test; only the stage's end is stored.
+    path: bool = False
 
     @classmethod
     def contact(cls, settings: NewtonSettings) -> Policy:
@@ -293,6 +296,9 @@ class NewtonSolver:
                 self.gamma,
             )
             if res_ok and bc_ok and full and last_inc <= st.stol * ell:
+                self._hook("commit")
+                return result(CONVERGED)
+            if self._policy.path and bc_ok and res_norm <= st.atol + st.path_rtol * scale:
                 self._hook("commit")
                 return result(CONVERGED)
             if res_norm > st.divergence_factor * max(scale, st.atol):

@@ -15,9 +15,10 @@ class NewtonSettings:
 
     max_iterations: int = 60  # Newton steps per load increment
     max_stage_iterations: int = 1000  # Newton steps per stage (all increments): bounds the cost
-    rtol: float = 1e-8  # residual, relative to the force scale
+    rtol: float = 1e-6  # residual, relative to the force scale
+    path_rtol: float = 1e-2  # residual of an intermediate increment of a ramp (load < 1)
     atol: float = 1e-10  # residual floor, mN
-    stol: float = 1e-8  # increment and Dirichlet mismatch, relative to the length scale
+    stol: float = 1e-5  # increment and Dirichlet mismatch, relative to the length scale
     load_steps: int = 1  # first load increment = 1 / load_steps of the stage's change
     max_load_cuts: int = 6  # consecutive halvings of the load increment before giving up
     max_strain_step: float = 0.5  # largest |grad du| (Frobenius, per cell) of one update

@@ -269,11 +269,13 @@ def create_vector(L: Any) -> PETSc.Vec:
         return dolfinx.fem.petsc.create_vector(L.function_spaces[0])
 
 
-def assemble_matrix(A: PETSc.Mat, a: Any) -> PETSc.Mat:
-    """Zero ``A`` and assemble ``a`` into it without boundary conditions (finalised)."""
+def assemble_matrix(A: PETSc.Mat, a: Any, *, finalize: bool = True) -> PETSc.Mat:
+    """Zero ``A`` and assemble ``a`` into it without boundary conditions; finalised unless
+    ``finalize`` is False (more values are added before one ``A.assemble()``)."""
     A.zeroEntries()
     dolfinx.fem.petsc.assemble_matrix(A, a)
-    A.assemble()
+    if finalize:
+        A.assemble()
     return A
 
 

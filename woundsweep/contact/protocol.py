@@ -10,7 +10,7 @@ from typing import Any, NamedTuple, Protocol
 
 import numpy as np
 
-__all__ = ["GPA_TO_KPA", "ContactModel", "ContactSummary", "add_csr"]
+__all__ = ["GPA_TO_KPA", "ContactModel", "ContactSummary", "add_csr", "structure"]
 
 GPA_TO_KPA = 1.0e6  # stiffness in GPa -> kPa
 
@@ -30,6 +30,11 @@ class ContactModel(Protocol):
     ``k_V_kPa`` is the penalty (0 switches the contact terms off). The energy is C1 in ``u``
     and its residual and tangent are exact derivatives; ``mult`` and the two multiplier
     methods serve the semi-smooth step (`woundsweep.contact.multipliers`).
+
+    The coupling pattern is what lets the wound problem preallocate its matrix once per
+    contact episode: after `plan_pattern`, `coupling_pattern` holds every entry the tangent
+    has at states near the planned one, and a tangent that reaches past it grows the pattern
+    (``pattern_version`` changes) before it is returned.
     """
 
     k_V_kPa: float
@@ -37,6 +42,7 @@ class ContactModel(Protocol):
     detect_time_s: float  # cumulative, since `reset_timers`
     assembly_time_s: float
     searches: int
+    pattern_version: int  # changes with the coupling pattern (planned, grown or cleared)
 
     def energy(self, u: np.ndarray) -> float:
         """Penalty energy (mN mm) at ``u``."""
@@ -46,8 +52,25 @@ class ContactModel(Protocol):
         """Add the contact forces at ``u`` to an assembled PETSc vector."""
         ...
 
+    def tangent_csr(self, u: np.ndarray) -> Any:
+        """Contact tangent at ``u``, a scipy CSR matrix (grows the coupling pattern if needed)."""
+        ...
+
     def add_jacobian(self, A: Any, u: np.ndarray) -> None:
         """Add the contact tangent at ``u`` to an assembled PETSc matrix and re-finalise it."""
+        ...
+
+    def plan_pattern(self, u: np.ndarray) -> None:
+        """Set the coupling pattern to the couplings of the states near ``u``."""
+        ...
+
+    def clear_pattern(self) -> None:
+        """Drop the coupling pattern (tangents are no longer checked against it)."""
+        ...
+
+    def coupling_pattern(self) -> Any:
+        """The coupling pattern's structure (scipy CSR of ones, n_dofs square), or None if
+        none is planned."""
         ...
 
     def penalty_multipliers(self, u: np.ndarray) -> np.ndarray:
@@ -67,11 +90,13 @@ class ContactModel(Protocol):
         ...
 
 
-def add_csr(A: Any, K: Any) -> None:
-    """Add the scipy CSR matrix ``K`` to the assembled PETSc matrix ``A`` and re-finalise it.
+def add_csr(A: Any, K: Any, *, finalize: bool = True) -> None:
+    """Add the scipy CSR matrix ``K`` to the PETSc matrix ``A``; re-finalise it unless
+    ``finalize`` is False.
 
-    Contact terms couple nodes across the wound that the finite-element pattern does not, so
-    new nonzeros are allowed."""
+    An entry outside the preallocated pattern is inserted (a malloc and a new nonzero state,
+    so MUMPS redoes its analysis), never refused: the contact terms couple nodes across the
+    wound that the finite-element pattern does not."""
     from petsc4py import PETSc
 
     A.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
@@ -81,4 +106,24 @@ def add_csr(A: Any, K: Any) -> None:
         K.data.astype(PETSc.ScalarType),
         addv=PETSc.InsertMode.ADD_VALUES,
     )
-    A.assemble()
+    if finalize:
+        A.assemble()
+
+
+def structure(*mats: Any) -> Any:
+    """The union of the sparsity structures of scipy sparse matrices of one shape: a CSR
+    matrix of ones with sorted indices (explicit zeros count as entries)."""
+    import scipy.sparse
+
+    parts = []
+    for M in mats:
+        S = scipy.sparse.csr_matrix(M, copy=True)
+        S.data = np.ones(len(S.data), dtype=np.int32)  # positive: a sum cannot cancel an entry
+        parts.append(S)
+    out = parts[0]
+    for S in parts[1:]:
+        out = out + S
+    out = scipy.sparse.csr_matrix(out)
+    out.sum_duplicates()
+    out.data[:] = 1
+    return out

@@ -129,6 +129,11 @@ class ZoneTie:
             self._unit = scipy.sparse.coo_matrix((vals, (rows, cols)), shape=shape).tocsr()
         return self._unit * k_V_kPa
 
+    def coupling_pattern(self) -> Any:
+        """Structure of the tangent (scipy CSR of ones, n_dofs square): fixed by the pairs."""
+        K = self.tangent_csr(1.0)
+        return type(K)((np.ones(K.nnz), K.indices, K.indptr), shape=K.shape)
+
     def add_residual(self, b: Any, u: np.ndarray, k_V_kPa: float) -> None:
         """Add the tie forces to an assembled PETSc vector ``b`` (serial)."""
         if self.active and k_V_kPa > 0:

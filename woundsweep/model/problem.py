@@ -7,15 +7,26 @@ protocol. The contact and tie terms are added while the penalty is on
 (``contact.k_V_kPa > 0``; the tie only once set); ``multipliers`` are the contact multipliers Newton
 carries there. The potential is not used by Newton: that it exists (every load of stages 4-6
 is dead) makes their tangent symmetric, and `tests/test_stages_contact.py` checks R = dPi/du.
+
+Sparsity of the tangent matrix ``A``: while the contact is off, that of the form; while it is
+on, the form's plus the contact's coupling pattern (planned at the first tangent of a contact
+episode, grown by the contact when a tangent reaches past it) plus the tie's fixed pairs,
+preallocated at once. Between the growths the Newton steps add no nonzeros, so PETSc does not
+reallocate and MUMPS keeps its symbolic analysis.
 """
 
 from __future__ import annotations
 
+import time
+from typing import Any
+
 import numpy as np
+import scipy.sparse
 from petsc4py import PETSc
 
 from .. import compat
 from ..contact import ContactModel, ContactMultipliers, ZoneTie
+from ..contact.protocol import add_csr, structure
 from .domain import WoundDomain
 from .forms import WoundForms
 
@@ -34,6 +45,10 @@ class WoundProblem:
     ) -> None:
         self.domain, self.forms, self.contact, self.tie = domain, forms, contact, tie
         self.A = compat.create_matrix(forms.a_form)
+        # A's sparsity (module docstring): the form's structure once seen, and the contact's
+        # pattern_version A is preallocated for (None: the form's alone).
+        self._form_structure: Any = None
+        self._pattern_version: int | None = None
         # Carried by Newton in the contact stages (woundsweep.contact.multipliers).
         self.multipliers = (
             ContactMultipliers(contact, self.solution) if contact is not None else None
@@ -57,12 +72,63 @@ class WoundProblem:
                 self.tie.add_residual(b, self.solution(), c.k_V_kPa)
 
     def jacobian(self, A: PETSc.Mat) -> None:
-        compat.assemble_matrix(A, self.forms.a_form)
         c = self._contact_on()
+        if A is not self.A:  # not the problem's matrix: its pattern grows by insertion
+            compat.assemble_matrix(A, self.forms.a_form)
+            if c is not None:
+                c.add_jacobian(A, self.solution())
+                if self.tie is not None:
+                    self.tie.add_jacobian(A, c.k_V_kPa)
+            return
+        if c is None:
+            if self._pattern_version is not None:  # a contact episode ended
+                self._preallocate(A, None)
+            compat.assemble_matrix(A, self.forms.a_form)
+            if self._form_structure is None:
+                self._form_structure = self._structure_of(A)
+            return
+        u = self.solution()
+        if c.coupling_pattern() is None:
+            c.plan_pattern(u)
+        K = c.tangent_csr(u)  # grows the coupling pattern if it reaches past it
+        if self._pattern_version != c.pattern_version:
+            self._preallocate(A, c)
+        # The form, contact and tie terms go in as one batch: one finalisation per step.
+        compat.assemble_matrix(A, self.forms.a_form, finalize=False)
+        t0 = time.perf_counter()
+        if K.nnz:
+            add_csr(A, K, finalize=False)
+        c.assembly_time_s += time.perf_counter() - t0
+        if self.tie is not None and self.tie.active:
+            add_csr(A, self.tie.tangent_csr(c.k_V_kPa), finalize=False)
+        A.assemble()
+
+    @staticmethod
+    def _structure_of(A: PETSc.Mat) -> Any:
+        """The nonzero structure of the assembled matrix ``A`` (scipy CSR of ones)."""
+        indptr, indices, _ = A.getValuesCSR()
+        return scipy.sparse.csr_matrix(
+            (np.ones(len(indices), dtype=np.int32), indices, indptr), shape=A.getSize()
+        )
+
+    def _preallocate(self, A: PETSc.Mat, c: ContactModel | None) -> None:
+        """Give ``A`` the form's structure plus, with ``c``, the contact's coupling pattern and
+        the tie's pairs (no values are kept); without ``c`` the contact's pattern is dropped."""
+        if self._form_structure is None:  # A holds no more than the form's structure yet
+            compat.assemble_matrix(A, self.forms.a_form)
+            self._form_structure = self._structure_of(A)
+        parts = [self._form_structure]
         if c is not None:
-            c.add_jacobian(A, self.solution())
-            if self.tie is not None:
-                self.tie.add_jacobian(A, c.k_V_kPa)
+            parts.append(c.coupling_pattern())
+            if self.tie is not None and len(self.tie):
+                parts.append(self.tie.coupling_pattern())
+        elif self.contact is not None:
+            self.contact.clear_pattern()
+        P = structure(*parts)
+        A.setPreallocationCSR((P.indptr.astype(PETSc.IntType), P.indices.astype(PETSc.IntType)))
+        # Preallocation forbids new entries; one outside the pattern must still go in.
+        A.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
+        self._pattern_version = None if c is None else c.pattern_version
 
     def energy(self) -> float | None:
         """Total potential (mN mm) at the current state, or None while a load follows the

@@ -203,3 +203,32 @@ def test_the_pattern_grows_when_a_state_leaves_it(stage4) -> None:
         assert abs(J - J_ref).max() <= 1e-12 * abs(J_ref).max()
     finally:
         c.pattern_gap, c.pattern_margin = saved
+
+
+@pytest.mark.fem
+def test_an_entry_outside_the_pattern_still_reaches_the_factorised_matrix(stage4) -> None:
+    """A tangent entry the preallocation did not foresee is inserted, never dropped: through
+    the block matrix too, whose grown structure the factorised matrix then takes."""
+    from woundsweep import compat
+
+    m = stage4["model"]
+    c, A = m.contact, m.problem.A
+    n = A.getSize()[0]
+    i, j = 0, n - 1  # two dofs far apart: no form, contact or tie term couples them
+    assert _csr(A)[i, j] == 0.0
+    K = c.tangent_csr(m.u) + scipy.sparse.csr_matrix(([7.0, 7.0], ([i, j], [j, i])), shape=(n, n))
+    m.problem._assemble(A, c, K)
+    assert A.getInfo()["mallocs"] == 0  # A took the grown structure at once
+    B = compat.create_matrix(m.forms.a_form)
+    compat.assemble_matrix(B, m.forms.a_form, finalize=False)
+    from woundsweep.contact.protocol import add_csr
+
+    add_csr(B, K, finalize=False)
+    if m.tie.active:
+        add_csr(B, m.tie.tangent_csr(c.k_V_kPa), finalize=False)
+    B.assemble()
+    J, J_ref = _csr(A), _csr(B)
+    assert J[i, j] == 7.0 and J[j, i] == 7.0
+    assert abs(J - J_ref).max() <= 1e-12 * abs(J_ref).max()
+    m.problem.jacobian(A)  # the next step: the stray entry is gone again (zeroed)
+    assert _csr(A)[i, j] == 0.0

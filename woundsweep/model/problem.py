@@ -13,6 +13,11 @@ on, the form's plus the contact's coupling pattern (planned at the first tangent
 episode, grown by the contact when a tangent reaches past it) plus the tie's fixed pairs,
 preallocated at once. Between the growths the Newton steps add no nonzeros, so PETSc does not
 reallocate and MUMPS keeps its symbolic analysis.
+
+Where DOLFINx makes one, the tangent is assembled into a block matrix (BAIJ, 3x3 node blocks:
+DOLFINx then inserts a cell's values with one search per node pair instead of one per entry)
+with the same pattern closed to whole blocks, and copied into ``A``, the scalar AIJ matrix
+that MUMPS's LDL^T factorises.
 """
 
 from __future__ import annotations
@@ -33,6 +38,19 @@ from .forms import WoundForms
 __all__ = ["WoundProblem"]
 
 
+def _blocks(P: Any, bs: int) -> Any:
+    """The block structure (CSR of ones, sorted) of the blocks of size ``bs`` that hold an
+    entry of the structure ``P``."""
+    coo = P.tocoo()
+    n = P.shape[0] // bs
+    ones = np.ones(len(coo.row), dtype=np.int32)
+    Pb = scipy.sparse.csr_matrix((ones, (coo.row // bs, coo.col // bs)), shape=(n, n))
+    Pb.sum_duplicates()
+    Pb.sort_indices()
+    Pb.data[:] = 1
+    return Pb
+
+
 class WoundProblem:
     """Residual R(u), tangent dR/du and potential of the wound model at the state ``forms.u``."""
 
@@ -45,6 +63,8 @@ class WoundProblem:
     ) -> None:
         self.domain, self.forms, self.contact, self.tie = domain, forms, contact, tie
         self.A = compat.create_matrix(forms.a_form)
+        self._B = compat.create_block_matrix(forms.a_form)  # None: assemble into A itself
+        self._B_nnz: float | None = None  # B's entries when A last took its structure
         # A's sparsity (module docstring): the form's structure once seen, and the contact's
         # pattern_version A is preallocated for (None: the form's alone).
         self._form_structure: Any = None
@@ -83,7 +103,7 @@ class WoundProblem:
         if c is None:
             if self._pattern_version is not None:  # a contact episode ended
                 self._preallocate(A, None)
-            compat.assemble_matrix(A, self.forms.a_form)
+            self._assemble(A)
             if self._form_structure is None:
                 self._form_structure = self._structure_of(A)
             return
@@ -93,15 +113,31 @@ class WoundProblem:
         K = c.tangent_csr(u)  # grows the coupling pattern if it reaches past it
         if self._pattern_version != c.pattern_version:
             self._preallocate(A, c)
-        # The form, contact and tie terms go in as one batch: one finalisation per step.
-        compat.assemble_matrix(A, self.forms.a_form, finalize=False)
-        t0 = time.perf_counter()
-        if K.nnz:
-            add_csr(A, K, finalize=False)
-        c.assembly_time_s += time.perf_counter() - t0
-        if self.tie is not None and self.tie.active:
-            add_csr(A, self.tie.tangent_csr(c.k_V_kPa), finalize=False)
-        A.assemble()
+        self._assemble(A, c, K)
+
+    def _assemble(self, A: PETSc.Mat, c: ContactModel | None = None, K: Any = None) -> None:
+        """Assemble the form, and with ``c`` the contact tangent ``K`` and the tie's, into A
+        (through the block matrix where there is one): one finalisation per step."""
+        M = self._B if self._B is not None else A
+        compat.assemble_matrix(M, self.forms.a_form, finalize=False)
+        if c is not None:
+            t0 = time.perf_counter()
+            if K is not None and K.nnz:
+                add_csr(M, K, finalize=False)
+            c.assembly_time_s += time.perf_counter() - t0
+            if self.tie is not None and self.tie.active:
+                add_csr(M, self.tie.tangent_csr(c.k_V_kPa), finalize=False)
+        M.assemble()
+        if M is A:
+            return
+        nnz = M.getInfo()["nz_used"]
+        if nnz != self._B_nnz:  # first use, or an entry went in outside the pattern
+            indptr, indices, _ = M.getValuesCSR()
+            A.setPreallocationCSR((indptr, indices))
+            A.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
+            self._B_nnz = nnz
+        # The copy keeps A's structure (the same as M's), so MUMPS keeps its analysis.
+        M.convert(A.getType(), out=A)
 
     @staticmethod
     def _structure_of(A: PETSc.Mat) -> Any:
@@ -115,7 +151,7 @@ class WoundProblem:
         """Give ``A`` the form's structure plus, with ``c``, the contact's coupling pattern and
         the tie's pairs (no values are kept); without ``c`` the contact's pattern is dropped."""
         if self._form_structure is None:  # A holds no more than the form's structure yet
-            compat.assemble_matrix(A, self.forms.a_form)
+            self._assemble(A)
             self._form_structure = self._structure_of(A)
         parts = [self._form_structure]
         if c is not None:
@@ -125,6 +161,16 @@ class WoundProblem:
         elif self.contact is not None:
             self.contact.clear_pattern()
         P = structure(*parts)
+        if self._B is not None:  # the block matrix holds whole 3x3 blocks: A their entries
+            bs = self._B.getBlockSize()
+            Pb = _blocks(P, bs)
+            self._B.setPreallocationCSR(
+                (Pb.indptr.astype(PETSc.IntType), Pb.indices.astype(PETSc.IntType))
+            )
+            self._B.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
+            P = scipy.sparse.kron(Pb, np.ones((bs, bs), dtype=np.int32), format="csr")
+            P.sort_indices()
+            self._B_nnz = float(P.nnz)
         A.setPreallocationCSR((P.indptr.astype(PETSc.IntType), P.indices.astype(PETSc.IntType)))
         # Preallocation forbids new entries; one outside the pattern must still go in.
         A.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)

@@ -51,14 +51,17 @@ class _ScriptedNewton:
         return NewtonResult(status, 3 if ok else 10, 0.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0)
 
 
-def _run(limit: float, first_step: float, **settings: Any) -> tuple[_ScriptedNewton, Any]:
+def _run(
+    limit: float, first_step: float, max_step: float = 1.0, **settings: Any
+) -> tuple[_ScriptedNewton, Any]:
     newton = _ScriptedNewton(limit, NewtonSettings(**settings))
 
     def load(s: float) -> LoadState:
         newton.s = s
         return LoadState(np.zeros(0), None)
 
-    res = continuation(newton, np.zeros(0, dtype=np.int32), load, first_step=first_step)  # type: ignore[arg-type]
+    rows = np.zeros(0, dtype=np.int32)
+    res = continuation(newton, rows, load, first_step=first_step, max_step=max_step)  # type: ignore[arg-type]
     return newton, res
 
 
@@ -71,6 +74,12 @@ def test_a_cut_near_the_end_halves_the_step_actually_tried() -> None:
     assert res.status == MAX_ITERATIONS  # s > 0.9 never converges
     assert res.load_reached == pytest.approx(max(s for s in newton.tried if s <= 0.9))
     assert newton.problem.u[0] == pytest.approx(res.load_reached)  # the last converged state
+
+
+def test_increments_double_up_to_the_largest_step() -> None:
+    newton, res = _run(limit=1.0, first_step=0.125, max_step=0.25)
+    assert res.status == CONVERGED and res.cuts == 0
+    assert newton.tried == pytest.approx([0.125, 0.375, 0.625, 0.875, 1.0])
 
 
 def test_continuation_reaches_the_end_and_counts_cuts() -> None:

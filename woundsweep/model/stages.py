@@ -36,9 +36,12 @@ from .parameters import CONTACT_PENALTY_GPA, ClosureZone
 from .problem import WoundProblem
 from .stability import lowest_eigenvalues
 
-__all__ = ["CONTACT_START_kPa", "StageOutcome", "WoundModel"]
+__all__ = ["CONTACT_MAX_DECADES", "CONTACT_START_kPa", "StageOutcome", "WoundModel"]
 
 CONTACT_START_kPa = 1.0  # stage 4's penalty ramp starts here: far below the tissue moduli
+# Stage 4's penalty grows by at most this many decades per load increment: larger jumps
+# (increments double after easy ones) push the flanks apart faster than Newton can follow.
+CONTACT_MAX_DECADES = 1.5
 
 
 class StageOutcome(NamedTuple):
@@ -298,11 +301,14 @@ class WoundModel:
         k_from, k_to, load, scale = self._contact_load(stage, rows)
         policy = Policy.contact(self.settings)
         # Stage 4 releases the closure and brings the penalty up from CONTACT_START_kPa at the
-        # Dirichlet-closed state (six decades to 1 GPa): half a decade first. Stages 5 and 6 start in contact
-        # equilibrium and are solved in one increment (a cut halves it if needed).
-        first = min(1.0, 0.5 / max(np.log10(k_to / k_from), 1e-9)) if stage == 4 else 1.0
+        # Dirichlet-closed state (six decades to 1 GPa): half a decade first, at most
+        # CONTACT_MAX_DECADES later. Stages 5 and 6 start in contact equilibrium and are
+        # solved in one increment (a cut halves it if needed).
+        decades = max(np.log10(k_to / k_from), 1e-9)
+        first = min(1.0, 0.5 / decades) if stage == 4 else 1.0
+        largest = min(1.0, CONTACT_MAX_DECADES / decades) if stage == 4 else 1.0
         try:
-            res = continuation(self.newton, rows, load, scale, first, policy)
+            res = continuation(self.newton, rows, load, scale, first, policy, largest)
         finally:
             c.k_V_kPa = k_to
         diag: dict[str, float] = {}

@@ -49,11 +49,13 @@ def continuation(
     force_scale: float = 0.0,
     first_step: float | None = None,
     policy: Policy | None = None,
+    max_step: float = 1.0,
 ) -> ContinuationResult:
     """Ramp s from 0 to 1, solving at each increment; halve the increment after failures.
 
-    The first increment is ``first_step`` (default ``1 / settings.load_steps``); ``policy``
-    (default: the solver's settings) is passed to every Newton solve.
+    The first increment is ``first_step`` (default ``1 / settings.load_steps``), and an
+    increment doubles up to ``max_step``; ``policy`` (default: the solver's settings) is
+    passed to every Newton solve.
     """
     policy = policy if policy is not None else Policy(newton.settings)
     st = policy.settings
@@ -85,7 +87,7 @@ def continuation(
             s = s_next
             cuts_in_row = 0
             if res.iterations <= 4:
-                ds *= 2.0
+                ds = min(2.0 * ds, max_step)
             continue
         u[:] = u_saved
         cuts += 1

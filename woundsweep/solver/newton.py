@@ -28,7 +28,10 @@ increment ``||du||_inf <= stol * ell``, where that last increment must be a full
 yet converged; Newton takes a full step from it and tests again, so a
 converged state is one a full, undamped step leaves within the tolerances. ``f_scale`` is
 the larger of the given force scale and the current full residual norm (reactions
-included), unless ``Policy.fixed_scale``.
+included), unless ``Policy.fixed_scale``. Under ``Policy.path`` (an increment before the end
+of a load ramp, whose state is not a result) a solve ends once
+``||R_free||_2 <= atol + path_rtol * f_scale`` with the Dirichlet values met, without the
+full-step test.
 
 Statuses (`woundsweep.schema.StageStatus`): converged, max-iterations (the step budget, or a
 2-cycle: ``CYCLE_REPEATS`` updates in a row back on the state two updates before), diverged

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -373,8 +374,14 @@ def test_job_killed_mid_compile_leaves_a_lock_the_next_run_recovers_from(tmp_pat
     rd = _make_run(tmp_path, "jit")
     env = dict(os.environ, XDG_CACHE_HOME=str(tmp_path / "cache"))  # a cold, private JIT cache
     cache = tmp_path / "cache" / "fenics"
-    # Killed at the timeout while FFCx compiles the forms (a cold compile takes far longer).
-    res = _run(rd, "--shard", "0/9", "--timeout", "8", "--retries", "0", "--no-warmup", env=env)
+    # Killed at the timeout while FFCx compiles: through a C compiler that first waits far
+    # longer than the timeout, the kill lands inside the first compile however fast the
+    # machine or the DOLFINx version compiles (the job starts within seconds).
+    slow_cc = tmp_path / "slow-cc"
+    slow_cc.write_text(f'#!/bin/sh\nsleep 600\nexec {shutil.which("gcc") or "cc"} "$@"\n')
+    slow_cc.chmod(0o755)
+    slow = dict(env, CC=str(slow_cc))
+    res = _run(rd, "--shard", "0/9", "--timeout", "20", "--retries", "0", "--no-warmup", env=slow)
     assert res.returncode == 0, res.stderr
     first = pd.read_parquet(rd / "results")
     assert first["failure_class"].tolist() == ["timeout"]

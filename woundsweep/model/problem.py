@@ -131,7 +131,7 @@ class WoundProblem:
         if M is A:
             return
         nnz = M.getInfo()["nz_used"]
-        if nnz != self._B_nnz:  # first use, or an entry went in outside the pattern
+        if nnz != self._B_nnz:  # M newly preallocated, or an entry went in outside its pattern
             indptr, indices, _ = M.getValuesCSR()
             A.setPreallocationCSR((indptr, indices))
             A.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
@@ -161,19 +161,14 @@ class WoundProblem:
         elif self.contact is not None:
             self.contact.clear_pattern()
         P = structure(*parts)
-        if self._B is not None:  # the block matrix holds whole 3x3 blocks: A their entries
-            bs = self._B.getBlockSize()
-            Pb = _blocks(P, bs)
-            self._B.setPreallocationCSR(
-                (Pb.indptr.astype(PETSc.IntType), Pb.indices.astype(PETSc.IntType))
-            )
-            self._B.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
-            P = scipy.sparse.kron(Pb, np.ones((bs, bs), dtype=np.int32), format="csr")
-            P.sort_indices()
-            self._B_nnz = float(P.nnz)
-        A.setPreallocationCSR((P.indptr.astype(PETSc.IntType), P.indices.astype(PETSc.IntType)))
+        # The block matrix holds whole 3x3 blocks; A takes its entries at the next assembly.
+        M = self._B if self._B is not None else A
+        if M is self._B:
+            P = _blocks(P, M.getBlockSize())
+            self._B_nnz = None
+        M.setPreallocationCSR((P.indptr.astype(PETSc.IntType), P.indices.astype(PETSc.IntType)))
         # Preallocation forbids new entries; one outside the pattern must still go in.
-        A.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
+        M.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
         self._pattern_version = None if c is None else c.pattern_version
 
     def energy(self) -> float | None:

@@ -223,7 +223,7 @@ class WoundModel:
         top and interface), u_z = 0 on the deep face and continuous across the layers."""
         d = self.domain
         X = d.X
-        s = self.materials.tsf if self.materials is not None else 1.0
+        s = self.homogeneous[DERMIS].stretch  # the TSF, the same in both layers
         sub_nodes = np.unique(d.cell_nodes[d.cell_tags[d.cell_input] == SUBCUTIS])
         z_bottom = float(X[:, 2].min())
         z_int = float(X[sub_nodes, 2].max()) if len(sub_nodes) else z_bottom

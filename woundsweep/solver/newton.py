@@ -298,10 +298,9 @@ class NewtonSolver:
                 last_inc,
                 self.gamma,
             )
-            if res_ok and bc_ok and full and last_inc <= st.stol * ell:
-                self._hook("commit")
-                return result(CONVERGED)
-            if self._policy.path and bc_ok and res_norm <= st.atol + st.path_rtol * scale:
+            at_end = res_ok and full and last_inc <= st.stol * ell
+            on_path = self._policy.path and res_norm <= st.atol + st.path_rtol * scale
+            if bc_ok and (at_end or on_path):
                 self._hook("commit")
                 return result(CONVERGED)
             if res_norm > st.divergence_factor * max(scale, st.atol):

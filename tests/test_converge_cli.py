@@ -50,7 +50,7 @@ def test_converge_writes_levels_orders_and_a_figure(run_dir: Path, capsys) -> No
     assert [lv["mesh_size_factor"] for lv in levels] == pytest.approx([0.2, 0.26, 0.338])
     cells = [lv["cells"] for lv in levels]
     assert cells[0] < cells[1] < cells[2]
-    assert study["size_ratio"] == pytest.approx(1.3 ** (2 / 3))
+    assert study["size_ratios"] == pytest.approx([1.3 ** (2 / 3)] * 2)
     assert sorted(study["studies"]) == ["1", "2", "3"]
     assert "closure_traction_kPa" in study["studies"]["3"]
     assert "contact_force_mN" not in study["studies"]["3"]  # no contact before stage 4
@@ -58,7 +58,7 @@ def test_converge_writes_levels_orders_and_a_figure(run_dir: Path, capsys) -> No
     for stage, per_q in study["studies"].items():
         for q, (s,) in per_q.items():
             f3, f2, f1 = (lv["stages"][stage][q] for lv in levels)
-            ref = grid_study(f1, f2, f3, study["size_ratio"])
+            ref = grid_study(f1, f2, f3, study["size_ratios"][0])
             assert s["kind"] == ref.kind
             for key in ("order", "extrapolated", "gci_fine"):
                 want = getattr(ref, key)
@@ -67,6 +67,32 @@ def test_converge_writes_levels_orders_and_a_figure(run_dir: Path, capsys) -> No
     assert png[:8] == b"\x89PNG\r\n\x1a\n"
     # The level meshes are cached beside the study, not in the run's mesh cache.
     assert len(list((run_dir / "convergence" / "meshes").glob("*.npz"))) == 3
+
+
+@pytest.mark.fem
+def test_converge_on_listed_factors_uses_their_unequal_ratios(run_dir: Path, capsys) -> None:
+    from woundsweep.cli import main
+
+    factors = [0.2, 0.25, 0.34]
+    args = ["converge", str(run_dir), "--job", "0", "--factors", "0.2,0.25,0.34"]
+    assert main([*args, "--stages", "1-1"]) == 0
+    assert "dev %" in capsys.readouterr().out
+    study = json.loads((run_dir / "convergence" / "job_0.json").read_text())
+    levels = study["levels"]
+    assert [lv["mesh_size_factor"] for lv in levels] == factors
+    h = [(0.5 / m) ** (2 / 3) for m in factors]
+    assert study["size_ratios"] == pytest.approx([h[0] / h[1], h[1] / h[2]])
+    f3, f2, f1 = (lv["stages"]["1"]["p99_von_mises_kPa"] for lv in levels)
+    ref = grid_study(f1, f2, f3, h[1] / h[2], h[0] / h[1])
+    (s,) = study["studies"]["1"]["p99_von_mises_kPa"]
+    assert s["kind"] == ref.kind
+    devs = study["deviations"]["1"]["p99_von_mises_kPa"]
+    if ref.kind == "monotone":
+        assert devs == pytest.approx(
+            [(f - ref.extrapolated) / ref.extrapolated for f in (f3, f2, f1)]
+        )
+    else:
+        assert devs == [None, None, None]
 
 
 @pytest.mark.fem

@@ -7,7 +7,7 @@ import math
 import pytest
 
 from woundsweep.errors import WoundsweepError
-from woundsweep.model.convergence import level_factors
+from woundsweep.model.convergence import level_factors, parse_factors
 from woundsweep.model.gci import SAFETY_FACTOR, grid_studies, grid_study
 
 
@@ -73,13 +73,62 @@ def test_non_monotone_sequences_have_no_order(values, kind: str) -> None:
 def test_ratio_must_exceed_one() -> None:
     with pytest.raises(ValueError, match="exceed 1"):
         grid_study(1.0, 2.0, 3.0, 1.0)
+    with pytest.raises(ValueError, match="exceed 1"):
+        grid_study(1.0, 2.0, 3.0, 1.5, 0.9)
+
+
+def size_law(m: float) -> float:
+    return (0.5 / m) ** (2 / 3)
+
+
+@pytest.mark.parametrize(("f0", "C", "p"), [(18.0, 9.0, 1.0), (6.0, -0.8, 2.0), (20.0, 3.0, 0.55)])
+def test_unequal_ratios_recover_a_power_law(f0, C, p) -> None:
+    # The paper's factors and two finer levels: ratios 1.41, 1.25, 1.27, 1.25.
+    h = [size_law(m) for m in (0.3, 0.5, 0.7, 1.0, 1.4)]
+    values = [f0 + C * x**p for x in h]
+    for s in grid_studies(values, h):
+        assert s.kind == "monotone"
+        assert s.order == pytest.approx(p, rel=1e-9)
+        assert s.extrapolated == pytest.approx(f0, rel=1e-9)
+    f3, f2, f1 = values[-3:]
+    s = grid_studies(values, h)[-1]
+    assert s.gci_fine == pytest.approx(SAFETY_FACTOR * abs((f1 - f0) / f1), rel=1e-8)
+
+
+def test_unequal_ratios_divergence_is_against_the_zero_order_limit() -> None:
+    # With r21 != r32 equal differences are not the boundary: p -> 0 gives
+    # e32 / e21 -> ln r32 / ln r21, and any smaller growth has no positive order.
+    r21, r32 = 1.25, 1.6
+    limit = math.log(r32) / math.log(r21)
+    assert grid_study(10.0, 11.0, 11.0 + 1.01 * limit, r21, r32).kind == "monotone"
+    assert grid_study(10.0, 11.0, 11.0 + 0.99 * limit, r21, r32).kind == "divergent"
+    # Equal ratios keep the closed form.
+    assert grid_studies([13.0, 11.0, 10.0], [1.44, 1.2, 1.0])[0].order == pytest.approx(
+        math.log(2.0) / math.log(1.2), rel=1e-12
+    )
+
+
+def test_element_sizes_must_match_the_values() -> None:
+    with pytest.raises(ValueError, match="3 values but 2"):
+        grid_studies([1.0, 2.0, 3.0], [2.0, 1.0])
+
+
+def test_parse_factors() -> None:
+    assert parse_factors("0.3,0.5,0.7,1,1.4") == [0.3, 0.5, 0.7, 1.0, 1.4]
+    for text, msg in [("0.3,0.5", "at least 3"), ("0.3,x,1", "numbers"),
+                      ("0.3,0.7,0.5", "increase"), ("0.3,0.7,2.5", "in \\(0, 2\\]"),
+                      ("0,0.5,1", "in \\(0, 2\\]")]:  # fmt: skip
+        with pytest.raises(WoundsweepError, match=msg) as exc:
+            parse_factors(text)
+        assert exc.value.exit_code == 2 and "\n" not in str(exc.value)
 
 
 def test_level_factors() -> None:
     assert level_factors(0.3, 3, 1.5) == pytest.approx([0.3, 0.45, 0.675])
     assert level_factors(0.4, 3, 1.58113883)[-1] == pytest.approx(1.0)
+    assert level_factors(0.5, 3, 2.0)[-1] == pytest.approx(2.0)
     for args, text in [((0.3, 2, 1.5), "at least 3"), ((0.3, 3, 1.0), "greater than 1"),
-                       ((0.5, 4, 1.5), "reach 1.69 > 1")]:  # fmt: skip
+                       ((0.5, 5, 1.5), "reach 2.53 > 2")]:  # fmt: skip
         with pytest.raises(WoundsweepError, match=text) as exc:
             level_factors(*args)
         assert exc.value.exit_code == 2 and "\n" not in str(exc.value)

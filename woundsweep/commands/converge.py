@@ -1,8 +1,9 @@
-"""``woundsweep converge RUN_DIR --job N [--levels L] [--ratio r] [--stages A-B]``.
+"""``woundsweep converge RUN_DIR --job N [--levels L] [--ratio r | --factors LIST] [--stages A-B]``.
 
-Solves one job on L meshes whose mesh size factor grows by r per level (`model.convergence`)
-and prints, per stage and quantity, the value at each level, the observed order p, Roache's
-grid convergence index of the finest grid and the Richardson-extrapolated value. Writes
+Solves one job on L meshes whose mesh size factor grows by r per level, or on the listed
+factors (`model.convergence`), and prints, per stage and quantity, the value at each level,
+the observed order p, Roache's grid convergence index of the finest grid, the
+Richardson-extrapolated value and the largest deviation of a level from it. Writes
 RUN_DIR/convergence/job_<N>.json and job_<N>.png.
 """
 
@@ -36,7 +37,8 @@ def _num(v: Any, spec: str = ".4g") -> str:
 
 def study_lines(study: dict[str, Any]) -> list[str]:
     """The printed table: per stage one line per quantity (levels coarse to fine, then p,
-    GCI in % and the extrapolated value of the finest triple)."""
+    GCI in %, the extrapolated value of the finest triple and the largest |deviation| of a
+    level from it in %)."""
     levels = study["levels"]
     head = f"{'stage':>5} {'quantity':<11}" + "".join(
         f"{'m=' + format(lv['mesh_size_factor'], '.3g'):>11}" for lv in levels
@@ -44,17 +46,22 @@ def study_lines(study: dict[str, Any]) -> list[str]:
     lines = [
         f"job {study['job_index']}: {study['geometry']}",
         "cells: " + ", ".join(str(lv["cells"]) for lv in levels)
-        + f"; element-size ratio r = {study['size_ratio']:.4f}, Fs = {study['safety_factor']}",
-        head + f"{'p':>7}{'GCI %':>8}{'f_ext':>11}  kind",
+        + "; element-size ratios "
+        + ", ".join(format(r, ".4f") for r in study["size_ratios"])
+        + f"; Fs = {study['safety_factor']}",
+        head + f"{'p':>7}{'GCI %':>8}{'f_ext':>11}{'dev %':>8}  kind",
     ]  # fmt: skip
     for stage, per_q in study["studies"].items():
         for q, triples in per_q.items():
             vals = "".join(f"{_num(lv['stages'][stage][q]):>11}" for lv in levels)
             fin = triples[-1]
             gci = None if fin["gci_fine"] is None else 100 * fin["gci_fine"]
+            devs = [abs(d) for d in study["deviations"][stage][q] if d is not None]
+            dev = 100 * max(devs) if devs else None
             lines.append(
                 f"{stage:>5} {_SHORT[q]:<11}{vals}{_num(fin['order'], '.2f'):>7}"
-                f"{_num(gci, '.2f'):>8}{_num(fin['extrapolated']):>11}  {fin['kind']}"
+                f"{_num(gci, '.2f'):>8}{_num(fin['extrapolated']):>11}{_num(dev, '.2f'):>8}"
+                f"  {fin['kind']}"
             )
         bad = {lv["stages"][stage]["status"] for lv in levels} - {"converged"}
         if bad:
@@ -70,23 +77,39 @@ def study_lines(study: dict[str, Any]) -> list[str]:
     "--ratio", type=float, default=1.5, show_default=True,
     help="Mesh size factor ratio between levels (element sizes shrink by ratio^(2/3)).",
 )  # fmt: skip
+@click.option(
+    "--factors", "factors_text", default=None, metavar="LIST",
+    help="The levels' mesh size factors instead, increasing, up to 2, e.g. 0.3,0.5,0.7,1,1.4 "
+    "(the paper's factors and two finer levels).",
+)  # fmt: skip
 @click.option("--stages", "stages_text", default="1-6", show_default=True, help="Stages A-B.")
-def cmd(run_dir: Path, job_index: int, levels: int, ratio: float, stages_text: str) -> None:
+def cmd(
+    run_dir: Path,
+    job_index: int,
+    levels: int,
+    ratio: float,
+    factors_text: str | None,
+    stages_text: str,
+) -> None:
     """Solve one job on systematically refined meshes and estimate the discretisation error.
 
-    Level k uses the job's mesh size factor times ratio^k (every other mesh input is the
-    job's). Prints p99, maximum, closure gap, contact force and (stage 3) closure traction
-    per level, with the observed order p, the grid convergence index of the finest mesh (GCI,
-    Fs = 1.25) and the Richardson-extrapolated value of the three finest levels. Writes
+    Level k uses the job's mesh size factor times ratio^k, or the k-th of --factors (every
+    other mesh input is the job's). Prints p99, maximum, closure gap, contact force and
+    (stage 3) closure traction per level, with the observed order p, the grid convergence
+    index of the finest mesh (GCI, Fs = 1.25), the Richardson-extrapolated value of the three
+    finest levels and the largest deviation of a level from it. Writes
     RUN_DIR/convergence/job_<N>.json and job_<N>.png.
     """
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     stages = parse_stage_range(stages_text, SolverError)
-    from ..model.convergence import convergence_study
+    from ..model.convergence import convergence_study, parse_factors
 
+    factors = None if factors_text is None else parse_factors(factors_text)
     logging.getLogger().setLevel(logging.WARNING)  # FFCx/cffi log every compile at INFO
-    study = convergence_study(run_dir, job_index, levels, ratio, stages, echo=click.echo)
+    study = convergence_study(
+        run_dir, job_index, levels, ratio, stages, echo=click.echo, factors=factors
+    )
     for line in study_lines(study):
         click.echo(line)
     click.echo(f"wrote {study['json']} and {study['figure']}")

@@ -24,9 +24,12 @@ from typing import Any
 from ..errors import GeometryError
 from ..model.parameters import ClosureZone
 
-__all__ = ["SHAPES", "GeometrySpec", "wound_distance_mm"]
+__all__ = ["FINEST_FACTOR", "SHAPES", "GeometrySpec", "wound_distance_mm"]
 
 SHAPES = ("cylindrical", "wedge")
+# The finest mesh size factor a mesh can have. A sweep's grid takes factors in (0, 1];
+# `woundsweep converge` refines up to this one, to extrapolate past the grid's finest.
+FINEST_FACTOR = 2.0
 
 
 @dataclass(frozen=True)
@@ -34,7 +37,8 @@ class GeometrySpec:
     """Geometric parameters of one mesh (mm); validated on construction.
 
     ``wound_aspect_factor`` is the cylinder's a (None for a wedge); for a cylinder
-    ``wound_depth_mm`` must equal R - a w. ``mesh_size_factor`` in (0, 1]: larger is finer.
+    ``wound_depth_mm`` must equal R - a w. ``mesh_size_factor`` in (0, FINEST_FACTOR]: larger
+    is finer (a sweep's grid stays in (0, 1]).
     ``zone_y_fraction`` and ``zone_depth_fraction`` in (0, 1] bound the closure zone
     (|y| <= zone_y_fraction * L, z >= -zone_depth_fraction * d).
     """
@@ -187,8 +191,10 @@ def _validate(spec: GeometrySpec) -> None:
         if not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
             raise GeometryError(f"{name}={v!r} must be a positive length in mm")
     m = spec.mesh_size_factor
-    if not isinstance(m, (int, float)) or not math.isfinite(m) or not 0 < m <= 1:
-        raise GeometryError(f"mesh_size_factor={m!r} must be in (0, 1] (larger is finer)")
+    if not isinstance(m, (int, float)) or not math.isfinite(m) or not 0 < m <= FINEST_FACTOR:
+        raise GeometryError(
+            f"mesh_size_factor={m!r} must be in (0, {FINEST_FACTOR:g}] (larger is finer)"
+        )
     for name in ("zone_y_fraction", "zone_depth_fraction"):
         v = getattr(spec, name)
         if not isinstance(v, (int, float)) or not math.isfinite(v) or not 0 < v <= 1:

@@ -1,11 +1,14 @@
 """Mesh convergence of one job: the stages on systematically refined meshes, with `gci`.
 
-Level k meshes the job's geometry (closure zone included) at mesh size factor m r^k, m the
-job's; every other mesh input is the job's. The size law scales every element size with
-s = (0.5 / m)^(2/3) (`woundsweep.mesh.sizing`), so the element-size ratio between levels is
-r_h = r^(2/3), the ratio the observed order and the GCI use. The meshes are cached under
-``RUN_DIR/convergence/meshes/`` (ids: the hash of their `GeometrySpec`); the study is written
-to ``RUN_DIR/convergence/job_<N>.json`` and drawn in ``job_<N>.png``.
+The levels are mesh size factors: m r^k (k < levels, m the job's) or an explicit increasing
+list (e.g. the paper's 0.3, 0.5, 0.7 and finer ones, up to `FINEST_FACTOR`). Each meshes the
+job's geometry (closure zone included); every other mesh input is the job's. The size law
+scales every element size with s = (0.5 / m)^(2/3) (`woundsweep.mesh.sizing`): s is each
+level's relative element size, and the ratios of consecutive sizes are those the observed
+order and the GCI use (r^(2/3) for a constant factor ratio r). Each quantity's deviation at
+a level is (f - f_ext) / f_ext, f_ext the finest triple's extrapolation. The meshes are cached
+under ``RUN_DIR/convergence/meshes/`` (ids: the hash of their `GeometrySpec`); the study is
+written to ``RUN_DIR/convergence/job_<N>.json`` and drawn in ``job_<N>.png``.
 """
 
 from __future__ import annotations
@@ -19,10 +22,11 @@ from typing import Any
 
 from ..errors import WoundsweepError
 from ..fsutil import atomic_write, atomic_write_bytes
+from ..mesh.spec import FINEST_FACTOR
 from ..schema import StageStatus
 from .gci import SAFETY_FACTOR, grid_studies
 
-__all__ = ["QUANTITIES", "convergence_study", "draw_study", "level_factors"]
+__all__ = ["QUANTITIES", "convergence_study", "draw_study", "level_factors", "parse_factors"]
 
 # Per-stage quantities of the study: result fields, and the stage-3 traction from the
 # diagnostics.
@@ -42,12 +46,29 @@ def level_factors(mesh_size_factor: float, levels: int, ratio: float) -> list[fl
     if not ratio > 1:
         raise WoundsweepError(f"--ratio {ratio:g}: must be greater than 1")
     factors = [mesh_size_factor * ratio**k for k in range(levels)]
-    if factors[-1] > 1 + 1e-12:
+    if factors[-1] > FINEST_FACTOR * (1 + 1e-12):
         raise WoundsweepError(
             f"--levels {levels} --ratio {ratio:g} from the job's mesh size factor "
-            f"{mesh_size_factor:g} reach {factors[-1]:.3g} > 1 (the finest factor allowed)"
+            f"{mesh_size_factor:g} reach {factors[-1]:.3g} > {FINEST_FACTOR:g} "
+            "(the finest factor allowed)"
         )
-    return [min(f, 1.0) for f in factors]
+    return [min(f, FINEST_FACTOR) for f in factors]
+
+
+def parse_factors(text: str) -> list[float]:
+    """``--factors`` "0.3,0.5,0.7,1,1.4": at least 3 increasing factors in (0, FINEST_FACTOR]
+    (WoundsweepError, exit 2, otherwise)."""
+    try:
+        factors = [float(t) for t in text.split(",")]
+    except ValueError:
+        raise WoundsweepError(f"--factors {text!r}: expected numbers separated by commas") from None
+    if len(factors) < 3:
+        raise WoundsweepError(f"--factors {text!r}: at least 3 levels are needed for an order")
+    if not all(0 < f <= FINEST_FACTOR for f in factors):
+        raise WoundsweepError(f"--factors {text!r}: each must be in (0, {FINEST_FACTOR:g}]")
+    if any(b <= a for a, b in zip(factors, factors[1:])):
+        raise WoundsweepError(f"--factors {text!r}: must increase (coarse to fine)")
+    return factors
 
 
 def _stage_values(rec: Any) -> dict[str, Any]:
@@ -68,10 +89,14 @@ def convergence_study(
     stages: tuple[int, int] = (1, 6),
     echo: Callable[[str], None] | None = None,
     jit: dict[str, Any] | None = None,
+    factors: list[float] | None = None,
 ) -> dict[str, Any]:
-    """Solve job ``job_index`` at each level, write and return the study (JSON-ready dict)."""
+    """Solve job ``job_index`` at each level, write and return the study (JSON-ready dict).
+
+    The levels are ``factors`` if given, else ``levels`` factors from the job's by ``ratio``.
+    """
     from ..mesh.cache import get_mesh
-    from ..mesh.sizing import SIZE_LAW, _size_scale
+    from ..mesh.sizing import _size_scale
     from ..sweep.grid import canonical_hash, load_run
     from .job import job_model, job_row, job_spec, run_stages
 
@@ -79,7 +104,8 @@ def convergence_study(
     run = load_run(run_dir)
     row = job_row(run, job_index)
     base = job_spec(run, row)
-    factors = level_factors(base.mesh_size_factor, levels, ratio)
+    if factors is None:
+        factors = level_factors(base.mesh_size_factor, levels, ratio)
     out_dir = run.run_dir / "convergence"
     level_rows = []
     for k, m in enumerate(factors):
@@ -101,27 +127,35 @@ def convergence_study(
             }
         )
         del model
-    size_ratio = ratio ** SIZE_LAW["factor_exponent"]
+    sizes = [lv["relative_size"] for lv in level_rows]
+    ratios = [a / b for a, b in zip(sizes, sizes[1:])]
     studies: dict[str, dict[str, list[dict[str, Any]]]] = {}
+    deviations: dict[str, dict[str, list[float | None]]] = {}
     for stage in level_rows[0]["stages"]:
-        per_q = {}
+        per_q, dev_q = {}, {}
         for q in QUANTITIES:
             values = [lv["stages"][stage][q] for lv in level_rows]
             if all(v is None for v in values):
                 continue
             vals = [math.nan if v is None else v for v in values]
-            per_q[q] = [s._asdict() for s in grid_studies(vals, size_ratio)]
+            per_q[q] = [s._asdict() for s in grid_studies(vals, sizes)]
+            f_ext = per_q[q][-1]["extrapolated"]
+            dev_q[q] = [
+                (v - f_ext) / f_ext if math.isfinite(v) and math.isfinite(f_ext) and f_ext else None
+                for v in vals
+            ]
         studies[stage] = per_q
+        deviations[stage] = dev_q
     study = {
         "job_index": int(job_index),
         "job_id": str(row["job_id"]),
         "geometry": base.describe(),
-        "factor_ratio": ratio,
-        "size_ratio": size_ratio,
+        "size_ratios": ratios,
         "safety_factor": SAFETY_FACTOR,
         "levels": level_rows,
         "studies": studies,
-        "units": "mm, kPa, mN, s; gci_fine is a fraction of the finest value",
+        "deviations": deviations,
+        "units": "mm, kPa, mN, s; gci_fine and deviations are fractions",
     }
     path = out_dir / f"job_{int(job_index)}.json"
     atomic_write_bytes(path, (json.dumps(_jsonable(study), indent=1) + "\n").encode())

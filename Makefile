@@ -6,7 +6,7 @@ WS      := $(VENV)/bin/woundsweep
 DEMO_DIR ?= runs/demo
 PYTEST_ARGS ?=
 
-.PHONY: setup test test-fast test-dolfinx-latest demo bench lint format clean
+.PHONY: setup test test-fast test-dolfinx-latest demo bench bench-convergence lint format clean
 
 setup:
 	@bash scripts/setup.sh
@@ -38,6 +38,11 @@ demo: setup
 
 bench: setup
 	@for b in benchmarks/bench_*.py; do echo "== $$b"; $(PY) $$b || exit 1; done
+
+# p99's mesh convergence on eight paper geometries (not part of bench: 20-40 minutes).
+bench-convergence: setup
+	$(WS) generate sweeps/paper.yaml --out runs/paper
+	$(PY) benchmarks/convergence.py runs/paper
 
 lint: setup
 	$(VENV)/bin/ruff check woundsweep tests benchmarks

@@ -27,6 +27,7 @@ _SHORT = {
     "max_von_mises_kPa": "max vM kPa",
     "closure_gap_mm": "gap mm",
     "contact_force_mN": "contact mN",
+    "closure_force_left_mN": "closure mN",
     "closure_traction_kPa": "tau kPa",
 }
 
@@ -94,11 +95,11 @@ def cmd(
     """Solve one job on systematically refined meshes and estimate the discretisation error.
 
     Level k uses the job's mesh size factor times ratio^k, or the k-th of --factors (every
-    other mesh input is the job's). Prints p99, maximum, closure gap, contact force and
-    (stage 3) closure traction per level, with the observed order p, the grid convergence
-    index of the finest mesh (GCI, Fs = 1.25), the Richardson-extrapolated value of the three
-    finest levels and the largest deviation of a level from it. Writes
-    RUN_DIR/convergence/job_<N>.json and job_<N>.png.
+    other mesh input is the job's). Prints p99, maximum, closure gap, contact force, (stage
+    2) closure force and (stage 3) closure traction per level, with the observed order p,
+    the grid convergence index of the finest mesh (GCI, Fs = 1.25), the
+    Richardson-extrapolated value of the three finest levels and the largest deviation of a
+    level from it. Writes RUN_DIR/convergence/job_<N>.json and job_<N>.png.
     """
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
     os.environ.setdefault("OMP_NUM_THREADS", "1")

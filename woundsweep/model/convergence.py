@@ -28,13 +28,14 @@ from .gci import SAFETY_FACTOR, grid_studies
 
 __all__ = ["QUANTITIES", "convergence_study", "draw_study", "level_factors", "parse_factors"]
 
-# Per-stage quantities of the study: result fields, and the stage-3 traction from the
-# diagnostics.
+# Per-stage quantities of the study: result fields, and from the diagnostics the stage-2
+# closure reaction of the left flank and the stage-3 traction sized from it.
 QUANTITIES = (
     "p99_von_mises_kPa",
     "max_von_mises_kPa",
     "closure_gap_mm",
     "contact_force_mN",
+    "closure_force_left_mN",
     "closure_traction_kPa",
 )
 

@@ -1,0 +1,106 @@
+"""Mesh convergence of p99 on a benchmark set of paper geometries (`woundsweep converge`).
+
+Usage::
+
+    python benchmarks/convergence.py RUN_DIR [--jobs 1953,7786] [--factors 0.3,0.5,0.7,1,1.4]
+
+RUN_DIR is a run generated from sweeps/paper.yaml (``woundsweep generate sweeps/paper.yaml
+--out RUN_DIR``). The default jobs are eight paper geometries: both shapes, the smallest
+and the largest patch (patch factors 1 and 3), 0 and 45 degrees, with t_d = 1 mm,
+f_s = 1, f_w = 0.3, normal skin (cylinders a = 0.1, wedges f_d = 0.5). Each job is solved
+with ``woundsweep converge RUN_DIR --job N --factors ...`` (its JSON and figure land under
+RUN_DIR/convergence/; about 1-4 minutes per job on one core). The summary prints, per job
+and stage, p99 at each level, the finest triple's extrapolated value, the largest deviation
+of the paper's factors (0.3, 0.5, 0.7) from it, the kind of convergence and the observed
+order, then the stage-2 closure force the same way, and counts the stages 1, 2 and 4-6
+within 5 % with monotone convergence. Not part of ``make bench`` (it takes 10-30 minutes).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+from woundsweep.cli import main as woundsweep  # noqa: E402
+
+__all__ = ["main"]
+
+JOBS = (1953, 1954, 2358, 2359, 7785, 7786, 8190, 8191)
+FACTORS = "0.3,0.5,0.7,1,1.4"
+PAPER_FACTORS = (0.3, 0.5, 0.7)
+TOLERANCE = 0.05
+JUDGED_STAGES = ("1", "2", "4", "5", "6")
+
+
+def _f(v: float | None, spec: str = ".2f") -> str:
+    return "-" if v is None or not math.isfinite(v) else format(v, spec)
+
+
+def summary(study: dict, quantity: str, stages: tuple[str, ...]) -> list[tuple[str, bool, str]]:
+    """(stage, within tolerance and monotone, printed line) per stage that has ``quantity``."""
+    levels = study["levels"]
+    paper = [i for i, lv in enumerate(levels) if lv["mesh_size_factor"] in PAPER_FACTORS]
+    rows = []
+    for stage in stages:
+        per_q = study["studies"].get(stage, {})
+        if quantity not in per_q:
+            continue
+        fin = per_q[quantity][-1]
+        devs = study["deviations"][stage][quantity]
+        worst = max((abs(devs[i]) for i in paper if devs[i] is not None), default=None)
+        ok = fin["kind"] == "monotone" and worst is not None and worst <= TOLERANCE
+        values = " ".join(f"{_f(lv['stages'][stage][quantity]):>7}" for lv in levels)
+        line = (
+            f"{study['job_index']:>6} {stage:>5} {values} {_f(fin['extrapolated']):>7} "
+            f"{_f(None if worst is None else 100 * worst, '.1f'):>6} "
+            f"{fin['kind']:<11} {_f(fin['order']):>5} {'yes' if ok else 'no'}"
+        )
+        rows.append((stage, ok, line))
+    return rows
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("run_dir", type=Path)
+    ap.add_argument("--jobs", default=",".join(map(str, JOBS)))
+    ap.add_argument("--factors", default=FACTORS)
+    args = ap.parse_args(argv)
+    jobs = [int(j) for j in args.jobs.split(",")]
+    studies = []
+    for job in jobs:
+        cmd = ["converge", str(args.run_dir), "--job", str(job), "--factors", args.factors]
+        if woundsweep(cmd) != 0:
+            print(f"job {job}: woundsweep converge failed", file=sys.stderr)
+            return 1
+        path = args.run_dir / "convergence" / f"job_{job}.json"
+        studies.append(json.loads(path.read_text()))
+    factors = " ".join(f"{'m=' + format(f, 'g'):>7}" for f in map(float, args.factors.split(",")))
+    head = f"{'job':>6} {'stage':>5} {factors} {'f_ext':>7} {'dev %':>6} {'kind':<11} {'p':>5} ok"
+    print("\np99 von Mises (kPa); dev = largest |f - f_ext| / f_ext at m = 0.3, 0.5, 0.7")
+    print(head)
+    passed = total = 0
+    for study in studies:
+        for stage, ok, line in summary(study, "p99_von_mises_kPa", ("1", "2", "3", "4", "5", "6")):
+            print(line)
+            if stage in JUDGED_STAGES:
+                passed, total = passed + ok, total + 1
+    print("\nstage-2 closure force of the left flank (mN)")
+    print(head)
+    for study in studies:
+        for _stage, _ok, line in summary(study, "closure_force_left_mN", ("2",)):
+            print(line)
+    print(
+        f"\nstages 1, 2, 4-6 within {100 * TOLERANCE:g} % at m = 0.3, 0.5, 0.7 with monotone "
+        f"convergence: {passed} of {total}"
+    )
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

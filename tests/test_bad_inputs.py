@@ -241,6 +241,7 @@ def sweep_cases() -> list[Case]:
         "stages.contact_penalty_GPa": [[-1, 5, 100], [1, 5], "x"],
         "stages.nope": [1],
         "solver.quadrature_degree": [1.5, -1, "x"],
+        "solver.element_degree": [0, 3, 1.5, "x"],
         "solver.max_iterations": [-1, 2.5],
         "solver.rtol": [float("nan"), 0, -1e-8, float("inf")],
         "solver.nope": [1],

@@ -27,7 +27,7 @@ def domain() -> SimpleNamespace:
     X, cells = mesh.points, mesh.cells
     Dm = np.transpose(X[cells][:, 1:, :] - X[cells][:, :1, :], (0, 2, 1))
     return SimpleNamespace(
-        X=X, cell_nodes=cells, Dm_inv=np.linalg.inv(Dm), midpoints=X[cells].mean(axis=1)
+        X=X, cell_vertices=cells, Dm_inv=np.linalg.inv(Dm), midpoints=X[cells].mean(axis=1)
     )
 
 
@@ -43,7 +43,7 @@ def test_lines_are_the_papers(domain) -> None:
 
 def test_located_cells_hold_their_points(domain) -> None:
     rng = np.random.default_rng(1)
-    picks = rng.choice(len(domain.cell_nodes), 50, replace=False)
+    picks = rng.choice(len(domain.cell_vertices), 50, replace=False)
     assert np.array_equal(locate_cells(domain, domain.midpoints[picks]), picks)
     # Outside the patch and inside the wound opening: no cell.
     outside = np.array([[-3.0, 0.0, -0.5], [0.5, 0.0, -0.05], [0.5, 1.0, -0.2]])

@@ -42,6 +42,7 @@ __all__ = [
     "num_cells",
     "petsc_vec",
     "vector_space",
+    "node_coordinates",
     "vertex_input_index",
 ]
 
@@ -167,11 +168,16 @@ def mesh_from_arrays(
 # -- spaces, functions, forms ----------------------------------------------------------------
 
 
-def vector_space(mesh: Any) -> Any:
-    """Continuous P1 vector (displacement) space."""
+def vector_space(mesh: Any, degree: int = 1) -> Any:
+    """Continuous Lagrange vector (displacement) space of the given degree."""
     if hasattr(dolfinx.fem, "functionspace"):
-        return dolfinx.fem.functionspace(mesh, ("Lagrange", 1, (mesh.geometry.dim,)))
-    return dolfinx.fem.VectorFunctionSpace(mesh, ("Lagrange", 1))
+        return dolfinx.fem.functionspace(mesh, ("Lagrange", degree, (mesh.geometry.dim,)))
+    return dolfinx.fem.VectorFunctionSpace(mesh, ("Lagrange", degree))
+
+
+def node_coordinates(V: Any) -> np.ndarray:
+    """(nodes, 3) coordinates of the (block) dofs of a vector Lagrange space."""
+    return np.asarray(V.tabulate_dof_coordinates(), dtype=float)[:, :3].copy()
 
 
 def dg0_space(mesh: Any) -> Any:
@@ -189,10 +195,11 @@ def cell_dofs(V: Any) -> np.ndarray:
 
 
 def node_input_index(V: Any) -> np.ndarray:
-    """Input point index of every (block) dof of a P1 space V."""
+    """Input point index of every (block) dof of a Lagrange space V: its vertex's for the
+    vertex dofs (the first four of a cell), -1 for the others (edge midpoints of P2)."""
     mesh = V.mesh
     gdofs = _geometry_dofmap(mesh)
-    dofs = cell_dofs(V)
+    dofs = cell_dofs(V)[:, : gdofs.shape[1]]
     n_nodes = V.dofmap.index_map.size_local + V.dofmap.index_map.num_ghosts
     out = np.full(n_nodes, -1, dtype=np.int64)
     out[dofs.ravel()] = np.asarray(mesh.geometry.input_global_indices, dtype=np.int64)[

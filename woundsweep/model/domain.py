@@ -1,11 +1,13 @@
-"""The discretised wound patch: the DOLFINx mesh, its P1 space and the sets the stages act on.
+"""The discretised wound patch: the DOLFINx mesh, its P1 or P2 space and the sets the stages
+act on.
 
 `WoundDomain` holds the node and facet sets of the boundary conditions (x and y faces, deep
 face), the wound's mirror plane and depth, the closure zone on both flanks (the mesh's
 WOUND_ZONE facets and their nodes), the two point constraints that remove rigid in-plane
-motion, the facet tags of the solver's integrals, and the cellwise kinematics of P1 fields
-(gradient, det F). Node indices are DOLFINx dof-node
-indices (dof ``3 i + c`` is component c of node i); ``input_node`` maps input points to them.
+motion, the facet tags of the solver's integrals, and the kinematics of the displacement
+(`element`: gradient, det F). Node indices are DOLFINx dof-node indices (dof ``3 i + c`` is
+component c of node i; P2 nodes include the edge midpoints); ``input_node`` maps input
+points to their vertex nodes.
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ import numpy as np
 from .. import compat
 from ..contact.geometry import owning_cells
 from ..schema import BOTTOM, DERMIS, SUBCUTIS, WOUND_TAGS, WOUND_ZONE, X_MAX, X_MIN, Y_MAX, Y_MIN
+from .element import DEGREES, Element
 from .parameters import ClosureZone
 
 __all__ = [
@@ -49,11 +52,14 @@ class WoundDomain:
     ``mesh_data`` has the `MeshData` fields ``points``, ``cells``, ``cell_tags``, ``facets``,
     ``facet_tags`` (docs/design.md). The closure zone is the mesh's WOUND_ZONE facets;
     ``zone``, when given, must be the one the mesh was built with (``info["closure_zone"]``,
-    if recorded). Raises ValueError for a mesh that does not fit the contract (unused points,
-    no deep face or x faces, another closure zone).
+    if recorded). ``degree`` is the displacement element's (1 or 2). Raises ValueError for a
+    mesh that does not fit the contract (unused points, no deep face or x faces, another
+    closure zone).
     """
 
-    def __init__(self, mesh_data: Any, zone: ClosureZone | None = None) -> None:
+    def __init__(self, mesh_data: Any, zone: ClosureZone | None = None, degree: int = 1) -> None:
+        if degree not in DEGREES:
+            raise ValueError(f"element degree {degree!r}: expected one of {DEGREES}")
         built = (getattr(mesh_data, "info", None) or {}).get("closure_zone")
         if zone is not None and built is not None and built != dataclasses.asdict(zone):
             raise ValueError(f"the mesh's closure zone {built} is not the sweep's {zone}")
@@ -68,17 +74,22 @@ class WoundDomain:
         self.mesh, self.cell_mt, self.facet_mt = compat.mesh_from_arrays(
             pts, cells, ctags, facets, ftags
         )
-        self.V = compat.vector_space(self.mesh)
-        self.node_input = compat.node_input_index(self.V)
+        self.degree = degree
+        self.V = compat.vector_space(self.mesh, degree)
+        self.node_input = compat.node_input_index(self.V)  # -1 for P2's edge nodes
         self.cell_input = compat.cell_input_index(self.mesh)
-        n_nodes = len(self.node_input)
+        vertex = np.flatnonzero(self.node_input >= 0)
         self.input_node = np.full(len(pts), -1, dtype=np.int64)
-        self.input_node[self.node_input] = np.arange(n_nodes)
+        self.input_node[self.node_input[vertex]] = vertex
         if np.any(self.input_node < 0):
             raise ValueError("the mesh has points that belong to no cell")
-        self.X = pts[self.node_input]  # reference coordinates of the nodes
-        self.cell_nodes = compat.cell_dofs(self.V)  # (m, 4) node indices, mesh cell order
+        # Reference coordinates of the nodes (the vertices' exactly the input points).
+        self.X = pts[self.node_input] if degree == 1 else compat.node_coordinates(self.V)
+        self.X[vertex] = pts[self.node_input[vertex]]
+        self.cell_nodes = compat.cell_dofs(self.V)  # (m, 4 or 10) node indices, cell order
+        self.cell_vertices = self.cell_nodes[:, :4]
         self._prepare_kinematics()
+        self.element = Element(self.X, self.cell_nodes, self.Dm_inv)
         self._classify(facets, ftags)
 
     @property
@@ -86,13 +97,14 @@ class WoundDomain:
         return 3 * len(self.X)
 
     def wound_facets(self) -> np.ndarray:
-        """The wound surface's facets (k, 3) in node indices, the closure zone included."""
+        """The wound surface's facets (k, 3) in vertex node indices, the zone included (each
+        is split into flat triangles through all its nodes by ``element.sub_triangles``)."""
         return self.input_node[self.facets[np.isin(self.facet_tags, WOUND_TAGS)]]
 
     # -- kinematics -------------------------------------------------------------------------
 
     def _prepare_kinematics(self) -> None:
-        Xc = self.X[self.cell_nodes]  # (m, 4, 3)
+        Xc = self.X[self.cell_vertices]  # (m, 4, 3)
         Dm = np.transpose(Xc[:, 1:, :] - Xc[:, :1, :], (0, 2, 1))  # columns = edges
         det = np.linalg.det(Dm)
         self.ref_det = det
@@ -104,13 +116,11 @@ class WoundDomain:
         self.ell = float(np.linalg.norm(hi - lo))
 
     def grad(self, w: np.ndarray) -> np.ndarray:
-        """Cellwise gradient (m, 3, 3) of a P1 vector field given as flat dofs."""
-        W = w.reshape(-1, 3)[self.cell_nodes]
-        Dw = np.transpose(W[:, 1:, :] - W[:, :1, :], (0, 2, 1))
-        return Dw @ self.Dm_inv
+        """Gradients (p, 3, 3) of a vector field given as flat dofs (`Element.grad`)."""
+        return self.element.grad(w)
 
     def min_det(self, u: np.ndarray) -> float:
-        """Smallest cellwise det F at displacement ``u``."""
+        """Smallest det F at displacement ``u`` (per P1 cell, at P2 cells' vertices)."""
         G = self.grad(u)
         G[:, 0, 0] += 1.0
         G[:, 1, 1] += 1.0
@@ -118,13 +128,13 @@ class WoundDomain:
         return float(np.linalg.det(G).min())
 
     def max_strain(self, du: np.ndarray) -> float:
-        """Largest cellwise Frobenius norm of grad(du)."""
+        """Largest Frobenius norm of grad(du) (per P1 cell, at P2 cells' vertices)."""
         return float(np.sqrt(np.max(np.sum(self.grad(du) ** 2, axis=(1, 2)), initial=0.0)))
 
     # -- boundary sets ----------------------------------------------------------------------
 
     def _nodes_of(self, mask: np.ndarray) -> np.ndarray:
-        return np.unique(self.input_node[np.unique(self.facets[mask])])
+        return self.element.triangle_nodes(self.input_node[self.facets[mask]])
 
     def _classify(self, facets: np.ndarray, ftags: np.ndarray) -> None:
         """Node sets for the boundary conditions and derived facet tags for the integrals."""
@@ -139,8 +149,9 @@ class WoundDomain:
         self.half_length_y = 0.5 * (hi[1] - lo[1])
         self.z_top = float(hi[2])
         zone_left, zone_right = self._closure_zone(facets, ftags)
-        self.zone_left_facets = facets[zone_left]
-        self.zone_right_facets = facets[zone_right]
+        # The zone's flat triangles in node indices, per flank.
+        self.zone_left_facets = self.element.sub_triangles(self.input_node[facets[zone_left]])
+        self.zone_right_facets = self.element.sub_triangles(self.input_node[facets[zone_right]])
         self.zone_left_nodes = self.zone_nodes[self.X[self.zone_nodes, 0] < self.x_c]
         self.zone_right_nodes = self.zone_nodes[self.X[self.zone_nodes, 0] >= self.x_c]
         lateral = np.flatnonzero(np.isin(ftags, (X_MIN, X_MAX, Y_MIN, Y_MAX)))
@@ -176,7 +187,7 @@ class WoundDomain:
         self.x_c = 0.5 * (wx.min() + wx.max())
         self.wound_depth = float(self.z_top - p[wound_pts, 2].min())
         zf = np.flatnonzero(ftags == WOUND_ZONE)
-        self.zone_nodes = np.unique(self.input_node[np.unique(facets[zf])])
+        self.zone_nodes = self.element.triangle_nodes(self.input_node[facets[zf]])
         left = p[facets[zf]].mean(axis=1)[:, 0] < self.x_c
         return zf[left], zf[~left]
 
@@ -203,13 +214,13 @@ class WoundDomain:
 
     # -- measures of a state ----------------------------------------------------------------
 
-    def deformed_zone_area(self, side: str, u_input: np.ndarray) -> float:
-        """Deformed area (mm^2) of one flank's closure-zone facets (exact for P1) at the
-        displacement ``u_input`` (n_points, 3) in input point order."""
+    def deformed_zone_area(self, side: str, u: np.ndarray) -> float:
+        """Deformed area (mm^2) of one flank's closure-zone triangles at the displacement
+        dofs ``u`` (exact for P1; for P2 the area of the four flat triangles per facet)."""
         tri = self.zone_left_facets if side == "left" else self.zone_right_facets
         if len(tri) == 0:
             return 0.0
-        return float(_areas((self.points + u_input)[tri]).sum())
+        return float(_areas((self.X + u.reshape(-1, 3))[tri]).sum())
 
     def closure_gap(self, u: np.ndarray) -> float:
         """Widest x-opening between the flanks in the closure zone (mm, deformed; NaN if no zone).

@@ -143,7 +143,7 @@ def run_stages(
         ok = s.status == StageStatus.CONVERGED
         vm = model.forms.von_mises_cells() if ok else None
         stats: dict[str, float] = (
-            stress_summary(vm, d.volumes, d.cell_nodes, d.midpoints) if ok else {}
+            stress_summary(vm, d.volumes, d.cell_vertices, d.midpoints) if ok else {}
         )
         gap = out.diagnostics.get("closure_gap_mm")
         contact = {
@@ -255,9 +255,11 @@ def job_model(run: Any, row: Any, mesh: Any, jit: dict[str, Any] | None = None) 
         raise SolverError(f"job {job_index}: unknown skin type {skin!r}")
     materials = JobMaterials.from_sweep(run.sweep.materials, skin, angle)
     solver = run.sweep.solver
+    degree = int(solver.get("element_degree", 1))
     try:
         model = WoundModel(
             mesh,
+            element_degree=degree,
             quadrature_degree=int(solver.get("quadrature_degree", 1)),
             zone=ClosureZone.from_sweep(run.sweep.stages),
             settings=NewtonSettings.from_mapping(solver),

@@ -54,7 +54,7 @@ def locate_cells(domain: Any, points: np.ndarray, tol: float = 1e-9) -> np.ndarr
     Barycentric coordinates from the reference cell maps; the cell whose smallest coordinate
     is largest wins, accepted if that coordinate is >= -tol.
     """
-    X0 = domain.X[domain.cell_nodes[:, 0]]
+    X0 = domain.X[domain.cell_vertices[:, 0]]
     out = np.full(len(points), -1, dtype=np.int64)
     for i, p in enumerate(np.asarray(points, dtype=float)):
         lam = np.einsum("mij,mj->mi", domain.Dm_inv, p - X0)

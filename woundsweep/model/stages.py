@@ -64,6 +64,7 @@ class WoundModel:
         self,
         mesh_data: Any,
         *,
+        element_degree: int = 1,
         quadrature_degree: int = 1,
         zone: ClosureZone | None = None,
         settings: NewtonSettings | None = None,
@@ -73,14 +74,16 @@ class WoundModel:
         if len(contact_penalty_GPa) != 3:
             raise ValueError("contact_penalty_GPa needs three values (stages 4, 5, 6)")
         self.contact_penalty_kPa = tuple(float(k) * GPA_TO_KPA for k in contact_penalty_GPa)
-        self.domain = d = WoundDomain(mesh_data, zone)
+        self.domain = d = WoundDomain(mesh_data, zone, element_degree)
         self.contact: ContactModel | None = None
         self.tie: ZoneTie | None = None
         if d.has_wound:
-            left, right = split_wound_flanks(d.X, d.cell_nodes, d.wound_facets(), d.x_c)
+            flanks = split_wound_flanks(d.X, d.cell_vertices, d.wound_facets(), d.x_c)
+            left, right = (d.element.sub_triangles(f) for f in flanks)
             self.contact = FlankContact(d.X, left, right)
             self.tie = ZoneTie(d.X, d.zone_left_nodes, d.zone_right_nodes, left, d.x_c)
-        self.forms = WoundForms(d, quadrature_degree, jit)
+        # At least the degree that integrates the element's linear stiffness exactly.
+        self.forms = WoundForms(d, max(quadrature_degree, 2 * (element_degree - 1)), jit)
         self.problem = WoundProblem(d, self.forms, self.contact, self.tie)
         self.newton = NewtonSolver(self.problem, self.problem.A, settings or NewtonSettings())
         self.materials: JobMaterials | None = None
@@ -133,7 +136,7 @@ class WoundModel:
 
     def deformed_zone_area(self, side: str) -> float:
         """Deformed area (mm^2) of the closure-zone facets of one flank."""
-        return self.domain.deformed_zone_area(side, self.displacement_input())
+        return self.domain.deformed_zone_area(side, self.u)
 
     def closure_gap(self) -> float:
         """Widest x-opening between the flanks in the closure zone (mm; `WoundDomain`)."""

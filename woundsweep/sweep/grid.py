@@ -100,8 +100,13 @@ _RULE_NAMES = frozenset(MANIFEST_COLUMNS) - {"job_index", "job_id", "geometry_id
 DEFAULTS: dict[str, Any] = {
     "materials": copy.deepcopy(TABLE2),
     "stages": copy.deepcopy(STAGE_SETTINGS),
-    # Numerics: quadrature degree and `NewtonSettings` (which documents each key).
-    "solver": {"quadrature_degree": 1, **dataclasses.asdict(NewtonSettings())},
+    # Numerics: the displacement element's degree (1: P1, 2: P2), the quadrature degree (at
+    # least 2 (degree - 1)) and `NewtonSettings` (which documents each key).
+    "solver": {
+        "element_degree": 1,
+        "quadrature_degree": 1,
+        **dataclasses.asdict(NewtonSettings()),
+    },
     # The stress model (`woundsweep.analysis.settings.ModelSettings` documents each key).
     "analysis": dataclasses.asdict(ModelSettings()),
 }
@@ -301,6 +306,9 @@ def parse_sweep(data: Any, path: str = "<sweep>") -> Sweep:
                 "grid.skin_type",
                 f"unknown skin type {name!r} (expected one of {sorted(known)})",
             )
+    degree = settings["solver"]["element_degree"]
+    if degree not in (1, 2):
+        raise SweepError(path, "solver.element_degree", f"expected 1 or 2, got {degree!r}")
     zone = settings["stages"]["closure_zone"]
     for k, v in zone.items():
         if v > 1:

@@ -1,0 +1,115 @@
+"""The displacement element (`woundsweep.model.element`): P2 node bookkeeping, kinematics,
+the exact homogeneous state, and a wounded P2 job through all six stages."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from test_stages import SKIN_TYPES, box_patch, homogeneous_field, rel_l2
+
+pytestmark = pytest.mark.fem
+
+
+@pytest.fixture(scope="module")
+def p2_box():
+    from woundsweep.model.stages import WoundModel
+
+    return WoundModel(box_patch(n_xy=4), element_degree=2)
+
+
+@pytest.fixture(scope="module")
+def wedge_mesh():
+    from woundsweep.mesh.build import build_mesh
+    from woundsweep.mesh.spec import GeometrySpec
+
+    # t_d = 1, subcutis factor 1, L = 2, w = 0.6, apex depth 0.6 mm, m = 0.3
+    return build_mesh(GeometrySpec.wedge(1.0, 1.0, 2.0, 0.6, 0.6, 0.3))
+
+
+def test_p2_nodes_are_vertices_and_edge_midpoints(p2_box) -> None:
+    d = p2_box.domain
+    assert d.degree == 2 and d.cell_nodes.shape[1] == 10
+    n_vertices = len(d.points)
+    edges = {tuple(sorted((a, b))) for c in d.cells for i, a in enumerate(c) for b in c[i + 1 :]}
+    assert len(d.X) == n_vertices + len(edges)
+    # Vertex nodes carry their input point, edge nodes none.
+    assert np.count_nonzero(d.node_input >= 0) == n_vertices
+    np.testing.assert_array_equal(d.X[d.input_node], d.points)
+
+
+def test_p2_gradient_at_vertices_is_exact_for_a_quadratic_field(p2_box) -> None:
+    d = p2_box.domain
+    x, y, z = d.X.T
+    u = np.c_[x * x - 0.5 * y * z, x * y + 0.3 * z, z * z - 2.0 * x * z].ravel()
+    G = d.grad(u).reshape(len(d.cell_nodes), 4, 3, 3)
+    V = d.X[d.cell_vertices]  # (m, 4, 3): the points the gradients belong to
+    vx, vy, vz = V[..., 0], V[..., 1], V[..., 2]
+    want = np.stack(
+        [
+            np.stack([2 * vx, -0.5 * vz, -0.5 * vy], axis=-1),
+            np.stack([vy, vx, 0.3 + 0 * vx], axis=-1),
+            np.stack([-2.0 * vz, 0 * vx, 2 * vz - 2.0 * vx], axis=-1),
+        ],
+        axis=-2,
+    )
+    np.testing.assert_allclose(G, want, atol=1e-10)
+    # det F at a uniform stretch is the product of the stretches at every vertex.
+    s = np.array([1.1, 0.9, 1.05])
+    assert d.min_det(((s - 1.0) * d.X).ravel()) == pytest.approx(np.prod(s), rel=1e-12)
+
+
+@pytest.mark.parametrize("skin", SKIN_TYPES)
+def test_p2_stages_1_and_2_reproduce_the_homogeneous_state(p2_box, skin: str) -> None:
+    """Both pre-tension conditions give the per-layer homogeneous state at every P2 node."""
+    from woundsweep.model.materials import JobMaterials
+
+    m = p2_box
+    m.set_materials(JobMaterials.table2(skin, 0.0))
+    hom = homogeneous_field(m.domain.X, skin, 0.0)
+    for stage in (1, 2):
+        assert m.run_stage(stage).solve.status == "converged"
+        assert rel_l2(m.u.reshape(-1, 3), hom) < 1e-6
+
+
+def test_p2_zone_triangles_cover_the_zone_with_the_parents_orientation(wedge_mesh) -> None:
+    from woundsweep.contact.geometry import split_wound_flanks
+    from woundsweep.model.domain import WoundDomain
+
+    p1, p2 = WoundDomain(wedge_mesh), WoundDomain(wedge_mesh, degree=2)
+    zero1, zero2 = np.zeros(p1.n_dofs), np.zeros(p2.n_dofs)
+    for side in ("left", "right"):
+        # A flat facet's four triangles through its midpoints have its area.
+        a1, a2 = p1.deformed_zone_area(side, zero1), p2.deformed_zone_area(side, zero2)
+        assert a2 == pytest.approx(a1, rel=1e-12)
+    assert len(p2.zone_left_facets) == 4 * len(p1.zone_left_facets)
+    # Every P2 zone node is a zone vertex or the midpoint of a zone edge.
+    assert len(p2.zone_nodes) > len(p1.zone_nodes)
+    np.testing.assert_array_equal(p2.X[p2.input_node[wedge_mesh.facets[0]]], p1.X[
+        p1.input_node[wedge_mesh.facets[0]]])  # fmt: skip
+    left, _ = split_wound_flanks(p2.X, p2.cell_vertices, p2.wound_facets(), p2.x_c)
+    sub = p2.element.sub_triangles(left)
+
+    def normals(X, tri):
+        p = X[tri]
+        return np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+
+    parent = np.repeat(normals(p2.X, left), 4, axis=0)
+    child = normals(p2.X, sub)
+    assert np.all(np.einsum("ij,ij->i", parent, child) > 0)
+
+
+def test_p2_wedge_through_all_six_stages(wedge_mesh) -> None:
+    from woundsweep.model.job import run_stages
+    from woundsweep.model.materials import JobMaterials
+    from woundsweep.model.stages import WoundModel
+
+    m = WoundModel(wedge_mesh, element_degree=2)
+    records = run_stages(m, JobMaterials.table2("normal", 0.0), 6)
+    assert [r.result.status for r in records] == ["converged"] * 6
+    r2 = records[1]
+    assert abs(r2.result.closure_gap_mm) < 1e-8
+    f_left, f_right = r2.extra["closure_force_left_mN"], r2.extra["closure_force_right_mN"]
+    assert f_left > 0 and abs(f_left + f_right) < 1e-6 * f_left  # mirror-symmetric mesh
+    for r in records:
+        assert r.result.min_J > 0 and r.result.p99_von_mises_kPa > 0
+        assert r.result.dofs == m.domain.n_dofs

@@ -165,6 +165,7 @@ def test_closure_zone_matches_the_solver(store: Path) -> None:
     job = run.manifest.iloc[0]
     mesh = load_mesh(mesh_path(store, job["geometry_id"]))
     dom = WoundDomain(mesh, ClosureZone())
-    want = {tuple(sorted(f)) for f in np.concatenate([dom.zone_left_facets, dom.zone_right_facets])}
+    zone = np.concatenate([dom.zone_left_facets, dom.zone_right_facets])  # node numbering
+    want = {tuple(sorted(f)) for f in dom.node_input[zone]}
     mask = closure_zone_facets(mesh.facet_tags)
     assert want and {tuple(sorted(f)) for f in mesh.facets[mask]} == want

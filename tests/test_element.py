@@ -37,12 +37,14 @@ def test_p2_nodes_are_vertices_and_edge_midpoints(p2_box) -> None:
     np.testing.assert_array_equal(d.X[d.input_node], d.points)
 
 
-def test_p2_gradient_at_vertices_is_exact_for_a_quadratic_field(p2_box) -> None:
+def test_p2_gradient_at_the_quadrature_points_is_exact_for_a_quadratic_field(p2_box) -> None:
     d = p2_box.domain
     x, y, z = d.X.T
     u = np.c_[x * x - 0.5 * y * z, x * y + 0.3 * z, z * z - 2.0 * x * z].ravel()
-    G = d.grad(u).reshape(len(d.cell_nodes), 4, 3, 3)
-    V = d.X[d.cell_vertices]  # (m, 4, 3): the points the gradients belong to
+    from woundsweep.model.element import POINTS
+
+    G = d.grad(u).reshape(len(d.cell_nodes), len(POINTS), 3, 3)
+    V = np.einsum("kv,mvc->mkc", POINTS, d.X[d.cell_vertices])  # the rule's points
     vx, vy, vz = V[..., 0], V[..., 1], V[..., 2]
     want = np.stack(
         [
@@ -53,7 +55,7 @@ def test_p2_gradient_at_vertices_is_exact_for_a_quadratic_field(p2_box) -> None:
         axis=-2,
     )
     np.testing.assert_allclose(G, want, atol=1e-10)
-    # det F at a uniform stretch is the product of the stretches at every vertex.
+    # det F at a uniform stretch is the product of the stretches at every point.
     s = np.array([1.1, 0.9, 1.05])
     assert d.min_det(((s - 1.0) * d.X).ravel()) == pytest.approx(np.prod(s), rel=1e-12)
 

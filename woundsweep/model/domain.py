@@ -120,7 +120,7 @@ class WoundDomain:
         return self.element.grad(w)
 
     def min_det(self, u: np.ndarray) -> float:
-        """Smallest det F at displacement ``u`` (per P1 cell, at P2 cells' vertices)."""
+        """Smallest det F at displacement ``u`` (per P1 cell, at P2 cells' quadrature points)."""
         G = self.grad(u)
         G[:, 0, 0] += 1.0
         G[:, 1, 1] += 1.0
@@ -128,7 +128,7 @@ class WoundDomain:
         return float(np.linalg.det(G).min())
 
     def max_strain(self, du: np.ndarray) -> float:
-        """Largest Frobenius norm of grad(du) (per P1 cell, at P2 cells' vertices)."""
+        """Largest Frobenius norm of grad(du) (per P1 cell, at P2 cells' quadrature points)."""
         return float(np.sqrt(np.max(np.sum(self.grad(du) ** 2, axis=(1, 2)), initial=0.0)))
 
     # -- boundary sets ----------------------------------------------------------------------

@@ -5,18 +5,22 @@ vertices first, then the edges of the reference tetrahedron in `EDGES` order, ch
 against the coordinates). For the surface algorithms (closure zone, contact, tie) a P2
 boundary triangle is split into four flat triangles through its six nodes, with the parent's
 orientation; for P1 the triangle is its own. Kinematics: the displacement gradient of a P2
-cell is linear, and is evaluated at the cell's vertices (the P1 gradient is constant).
+cell is linear, and is evaluated at the four points of the degree-2 quadrature rule, where
+the energy is evaluated (the P1 gradient is constant).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["DEGREES", "EDGES", "Element"]
+__all__ = ["DEGREES", "EDGES", "POINTS", "Element"]
 
 DEGREES = (1, 2)
 # Local vertex pairs of the edges of the reference tetrahedron, in DOLFINx's (Basix's) order.
 EDGES = ((2, 3), (1, 3), (1, 2), (0, 3), (0, 2), (0, 1))
+# Barycentric coordinates of the symmetric 4-point degree-2 rule on a tetrahedron.
+_A, _B = 0.5854101966249685, 0.1381966011250105
+POINTS = np.full((4, 4), _B) + np.eye(4) * (_A - _B)
 
 
 class Element:
@@ -46,17 +50,19 @@ class Element:
         keys = np.minimum(a, b).ravel() * self.n_nodes + np.maximum(a, b).ravel()
         self._edge_keys, first = np.unique(keys, return_index=True)
         self._edge_mid = mids.ravel()[first]
-        # Gradients of the ten basis functions at the four vertices, per cell: (m, 4, 10, 3).
+        # Gradients of the ten basis functions at the rule's points, per cell: (m, 4, 10, 3).
+        # grad lambda_i are the rows of Dm_inv (i = 1..3) and minus their sum (i = 0).
         g = np.empty((len(verts), 4, 3))
         g[:, 1:, :] = Dm_inv
-        g[:, 0, :] = -Dm_inv.sum(axis=1)  # grad lambda_0
-        G = np.zeros((len(verts), 4, 10, 3))
-        for k in range(4):
+        g[:, 0, :] = -Dm_inv.sum(axis=1)
+        G = np.zeros((len(verts), len(POINTS), 10, 3))
+        for k, lam in enumerate(POINTS):
             for i in range(4):
-                G[:, k, i] = (4.0 * (i == k) - 1.0) * g[:, i]
+                G[:, k, i] = (4.0 * lam[i] - 1.0) * g[:, i]
             for e, (i, j) in enumerate(EDGES):
-                G[:, k, 4 + e] = 4.0 * ((j == k) * g[:, i] + (i == k) * g[:, j])
+                G[:, k, 4 + e] = 4.0 * (lam[j] * g[:, i] + lam[i] * g[:, j])
         self._G = G
+        self.points = POINTS
 
     def midpoints(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         """The midpoint nodes of the edges (a, b) (P2; KeyError-like ValueError if none)."""
@@ -86,7 +92,7 @@ class Element:
 
     def grad(self, w: np.ndarray) -> np.ndarray:
         """Displacement gradients (p, 3, 3) of a vector field given as flat dofs: one per
-        P1 cell, one per vertex of each P2 cell."""
+        P1 cell, one per quadrature point (`POINTS`) of each P2 cell."""
         W = w.reshape(-1, 3)[self.cell_nodes]
         if self.degree == 1:
             Dw = np.transpose(W[:, 1:, :] - W[:, :1, :], (0, 2, 1))

@@ -117,5 +117,8 @@ def test_solve_flags_interpenetration_and_stores_profiles(run_dir: Path) -> None
     assert np.isin(finite, vm1).all()
     for k, r in zip((1, 2, 3), rows):
         assert r["profile_along_wound_max_kPa"] == pytest.approx(np.nanmax(prof[k][0]), rel=1e-6)
-        y_at = pts[0, np.nanargmax(prof[k][0]), 1]
-        assert r["profile_along_wound_max_at_mm"] == pytest.approx(y_at, abs=1e-6)
+        # The stored position is one where the (float32) profile reaches its maximum: values
+        # equal to float32 precision can tie, so not necessarily numpy's first.
+        i = int(np.argmin(np.abs(pts[0, :, 1] - r["profile_along_wound_max_at_mm"])))
+        assert pts[0, i, 1] == pytest.approx(r["profile_along_wound_max_at_mm"], abs=1e-6)
+        assert prof[k][0][i] == pytest.approx(np.nanmax(prof[k][0]), rel=1e-6)

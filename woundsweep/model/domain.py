@@ -84,7 +84,7 @@ class WoundDomain:
         if np.any(self.input_node < 0):
             raise ValueError("the mesh has points that belong to no cell")
         # Reference coordinates of the nodes (the vertices' exactly the input points).
-        self.X = pts[self.node_input] if degree == 1 else compat.node_coordinates(self.V)
+        self.X = compat.node_coordinates(self.V)
         self.X[vertex] = pts[self.node_input[vertex]]
         self.cell_nodes = compat.cell_dofs(self.V)  # (m, 4 or 10) node indices, cell order
         self.cell_vertices = self.cell_nodes[:, :4]

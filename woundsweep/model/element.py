@@ -62,7 +62,6 @@ class Element:
             for e, (i, j) in enumerate(EDGES):
                 G[:, k, 4 + e] = 4.0 * (lam[j] * g[:, i] + lam[i] * g[:, j])
         self._G = G
-        self.points = POINTS
 
     def midpoints(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         """The midpoint nodes of the edges (a, b) (P2; KeyError-like ValueError if none)."""

@@ -27,6 +27,7 @@ from ..analysis.settings import ModelSettings
 from ..errors import GeometryError, StoreError, SweepError
 from ..fsutil import read_small_text
 from ..mesh.spec import GeometrySpec
+from ..model.element import DEGREES
 from ..model.parameters import STAGE_SETTINGS, TABLE2
 from ..solver.settings import NewtonSettings
 from .rules import compile_rule, evaluate_rule
@@ -307,8 +308,10 @@ def parse_sweep(data: Any, path: str = "<sweep>") -> Sweep:
                 f"unknown skin type {name!r} (expected one of {sorted(known)})",
             )
     degree = settings["solver"]["element_degree"]
-    if degree not in (1, 2):
-        raise SweepError(path, "solver.element_degree", f"expected 1 or 2, got {degree!r}")
+    if degree not in DEGREES:
+        raise SweepError(
+            path, "solver.element_degree", f"expected one of {DEGREES}, got {degree!r}"
+        )
     zone = settings["stages"]["closure_zone"]
     for k, v in zone.items():
         if v > 1:

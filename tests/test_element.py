@@ -71,6 +71,48 @@ def test_p2_stages_1_and_2_reproduce_the_homogeneous_state(p2_box, skin: str) ->
     for stage in (1, 2):
         assert m.run_stage(stage).solve.status == "converged"
         assert rel_l2(m.u.reshape(-1, 3), hom) < 1e-6
+        # The stress is uniform in each layer: every cell's 14 samples equal its cell mean.
+        samples, cells = m.forms.von_mises_samples(), m.forms.von_mises_cells()
+        assert samples.values.shape == (len(cells), 14)
+        np.testing.assert_allclose(samples.values, cells[:, None] * np.ones((1, 14)), rtol=1e-6)
+
+
+def test_p2_stress_samples_match_the_materials_at_their_points(p2_box) -> None:
+    """Von Mises of a quadratic field at the stress rule's points, against the numpy material
+    laws at the same physical points; the summary's maximum sits at the largest sample."""
+    from woundsweep.model.job import stress_summary
+    from woundsweep.model.materials import JobMaterials, first_piola, von_mises
+    from woundsweep.schema import DERMIS
+
+    m, d = p2_box, p2_box.domain
+    mats = JobMaterials.table2("normal", 30.0)
+    m.set_materials(mats)
+    x, y, z = d.X.T
+    m.u[:] = 0.05 * np.c_[x * x - 0.5 * y * z, x * y + 0.3 * z, z * z - 2.0 * x * z].ravel()
+    samples = m.forms.von_mises_samples()
+    assert samples.weights.sum() == pytest.approx(1.0) and np.all(samples.weights > 0)
+    corners = d.X[d.cell_vertices]
+    bary = np.c_[1.0 - samples.points.sum(axis=1), samples.points]
+    where = np.einsum("kv,mvc->mkc", bary, corners)
+    dermis = set(d.cell_mt.indices[d.cell_mt.values == DERMIS].tolist())
+    rng = np.random.default_rng(3)
+    for c in rng.choice(len(corners), 12, replace=False):
+        material = mats.dermis if c in dermis else mats.subcutis
+        for k, (px, py, pz) in enumerate(where[c]):
+            G = 0.05 * np.array(
+                [[2 * px, -0.5 * pz, -0.5 * py], [py, px, 0.3], [-2 * pz, 0, 2 * pz - 2 * px]]
+            )
+            F = np.eye(3) + G
+            want = von_mises(first_piola(material, F), F)
+            assert samples.values[c, k] == pytest.approx(want, rel=1e-9)
+    s = stress_summary(
+        m.forms.von_mises_cells(), d.volumes, d.cell_vertices, d.midpoints, samples, corners
+    )
+    c, k = np.unravel_index(np.argmax(samples.values), samples.values.shape)
+    assert s["max_von_mises_kPa"] == samples.values[c, k]
+    loc = [s[f"max_location_{a}_mm"] for a in "xyz"]
+    np.testing.assert_allclose(loc, where[c, k], atol=1e-12)
+    m.u[:] = 0.0
 
 
 def test_p2_zone_triangles_cover_the_zone_with_the_parents_orientation(wedge_mesh) -> None:

@@ -68,6 +68,38 @@ def test_nodal_p99_max_and_location() -> None:
     )
 
 
+def test_p99_and_maximum_over_samples() -> None:
+    from woundsweep.model.forms import StressSamples
+
+    # Two cells of volume 1 and 3, two samples each holding half of its cell.
+    cells = np.array([[0, 1, 2, 3], [4, 1, 2, 3]])
+    vol = np.array([1.0, 3.0])
+    mid = np.zeros((2, 3))
+    points = np.array([[0.1, 0.2, 0.3], [0.25, 0.25, 0.25]])
+    samples = StressSamples(np.array([[10.0, 50.0], [20.0, 30.0]]), np.array([0.5, 0.5]), points)
+    corners = np.array([np.eye(4)[:, :3], 2.0 * np.eye(4)[:, :3] + 1.0])
+    s = stress_summary(np.array([30.0, 25.0]), vol, cells, mid, samples, corners)
+    # Volumes: 10 -> 0.5, 20 -> 1.5, 30 -> 1.5, 50 -> 0.5 of 4: below 50 lies 87.5 %.
+    assert s["p99_von_mises_kPa"] == 50.0
+    assert s["max_von_mises_kPa"] == 50.0
+    # The largest sample is cell 0's second point: corner 0 + edges . (0.25, 0.25, 0.25).
+    want = corners[0, 0] + (corners[0, 1:] - corners[0, 0]).T @ points[1]
+    assert [s[f"max_location_{a}_mm"] for a in "xyz"] == pytest.approx(want.tolist())
+    # The nodal p99 still comes from the cell means.
+    assert (
+        s["p99_von_mises_nodal_kPa"]
+        == stress_summary(np.array([30.0, 25.0]), vol, cells, mid)["p99_von_mises_nodal_kPa"]
+    )
+    # Shares 0.999 / 0.001 per cell: 10 and 20 now hold 3.996 of 4 (99.9 %), so p99 is 20.
+    samples2 = samples._replace(weights=np.array([0.999, 0.001]))
+    assert (
+        stress_summary(np.array([30.0, 25.0]), vol, cells, mid, samples2, corners)[
+            "p99_von_mises_kPa"
+        ]
+        == 20.0
+    )
+
+
 def test_parse_stage_range() -> None:
     assert parse_stage_range("1-3") == (1, 3)
     assert parse_stage_range("2") == (2, 2)

@@ -30,17 +30,20 @@ __all__ = [
     "assemble_vector",
     "cell_dofs",
     "cell_input_index",
+    "compile_expression",
     "compile_form",
     "create_block_matrix",
     "create_matrix",
     "create_vector",
     "dg0_space",
+    "evaluate_expression",
     "facet_meshtags",
     "jit_options",
     "mesh_from_arrays",
     "node_input_index",
     "num_cells",
     "petsc_vec",
+    "quadrature_rule",
     "vector_space",
     "node_coordinates",
     "vertex_input_index",
@@ -262,6 +265,36 @@ def compile_form(
         [itg.reconstruct(metadata=dict(itg.metadata())) for itg in form.integrals()]
     )
     return dolfinx.fem.form(isolated, **kwargs)
+
+
+def compile_expression(expr: Any, points: np.ndarray, jit: dict[str, Any] | None = None) -> Any:
+    """``fem.Expression`` of a scalar UFL expression at reference ``points`` (k, 3), with JIT
+    options under either keyword spelling."""
+    params = inspect.signature(dolfinx.fem.Expression.__init__).parameters
+    jit_kw = "jit_options" if "jit_options" in params else "jit_params"
+    return dolfinx.fem.Expression(
+        expr, np.asarray(points, dtype=float), **{jit_kw: dict(jit or {})}
+    )
+
+
+def evaluate_expression(expr: Any, mesh: Any, cells: np.ndarray) -> np.ndarray:
+    """A compiled scalar expression's values at its points in ``cells``: (len(cells), k).
+    (0.9+ take the mesh as the first argument of ``eval``.)"""
+    cells = np.ascontiguousarray(cells, dtype=np.int32)
+    if "mesh" in inspect.signature(expr.eval).parameters:
+        values = expr.eval(mesh, cells)
+    else:
+        values = expr.eval(cells)
+    return np.asarray(values, dtype=float).reshape(len(cells), -1)
+
+
+def quadrature_rule(degree: int) -> tuple[np.ndarray, np.ndarray]:
+    """Basix's default rule of ``degree`` on the reference tetrahedron: points (k, 3) and
+    weights (k,) (summing to the reference volume, 1/6)."""
+    import basix
+
+    points, weights = basix.make_quadrature(basix.CellType.tetrahedron, int(degree))
+    return np.asarray(points, dtype=float), np.asarray(weights, dtype=float)
 
 
 def create_matrix(a: Any) -> PETSc.Mat:

@@ -10,7 +10,7 @@ from __future__ import annotations
 import dataclasses
 import time
 from collections.abc import Mapping
-from typing import Any
+from typing import Any, NamedTuple
 
 import dolfinx.fem
 import numpy as np
@@ -22,7 +22,24 @@ from ..schema import DERMIS, SUBCUTIS
 from .domain import LATERAL_DERMIS, LATERAL_SUBCUTIS, ZONE_LEFT, ZONE_RIGHT, WoundDomain
 from .materials import Fung, JobMaterials, Material, MooneyRivlin, von_mises
 
-__all__ = ["WoundForms"]
+__all__ = ["STRESS_RULE_DEGREE", "StressSamples", "WoundForms"]
+
+# The stress statistics sample von Mises at the points of this rule in each P2 cell: a P2
+# cell's stress varies within it, and a cell mean blurs the upper tail p99 measures
+# (docs/model.md, "Stress statistics"). Degree 4: 14 points, positive weights.
+STRESS_RULE_DEGREE = 4
+
+
+class StressSamples(NamedTuple):
+    """Von Mises (kPa) at reference points of every cell, mesh cell order.
+
+    ``values`` (cells, k); ``weights`` (k,), summing to 1 (a point's share of its cell's
+    volume); ``points`` (k, 3) on the reference tetrahedron.
+    """
+
+    values: np.ndarray
+    weights: np.ndarray
+    points: np.ndarray
 
 
 def _constant(mesh: Any, value: Any) -> dolfinx.fem.Constant:
@@ -103,13 +120,25 @@ class WoundForms:
         )
         Q = compat.dg0_space(mesh)
         q = ufl.TestFunction(Q)
-        vm = von_mises(P_d, F) * q * dx(DERMIS) + von_mises(P_s, F) * q * dx(SUBCUTIS)
+        vm_d, vm_s = von_mises(P_d, F), von_mises(P_s, F)
+        vm = vm_d * q * dx(DERMIS) + vm_s * q * dx(SUBCUTIS)
         jit_opts = compat.jit_options() if jit is None else jit
         t0 = time.perf_counter()
         self.R_form = compat.compile_form(R, jit_opts)
         self.a_form = compat.compile_form(a, jit_opts)
         self.vm_form = compat.compile_form(vm, jit_opts)
         self.Pi_form = compat.compile_form(Pi, jit_opts)
+        # P1's stress is constant per cell: its one sample is the cell value.
+        self._vm_points: dict[int, Any] = {}
+        self._sample_points, weights = np.full((1, 3), 0.25), np.ones(1)
+        if domain.degree > 1:
+            self._sample_points, weights = compat.quadrature_rule(STRESS_RULE_DEGREE)
+            for tag, expr in ((DERMIS, vm_d), (SUBCUTIS, vm_s)):
+                self._vm_points[tag] = (
+                    domain.cell_mt.indices[domain.cell_mt.values == tag],
+                    compat.compile_expression(expr, self._sample_points, jit_opts),
+                )
+        self._sample_weights = weights / weights.sum()
         self.jit_time_s = time.perf_counter() - t0
         self._vm_vec = compat.create_vector(self.vm_form)
         self._dg0_cell = compat.cell_dofs(Q)[:, 0]
@@ -135,3 +164,14 @@ class WoundForms:
         compat.assemble_vector(self._vm_vec, self.vm_form)
         integ = self._vm_vec.getArray(readonly=True)[self._dg0_cell]
         return integ / self._volumes
+
+    def von_mises_samples(self) -> StressSamples:
+        """Von Mises at the stress rule's points of every cell (P1: the cell values)."""
+        if not self._vm_points:
+            values = self.von_mises_cells()[:, None]
+        else:
+            values = np.empty((len(self._volumes), len(self._sample_weights)))
+            mesh = self.u.function_space.mesh
+            for cells, expr in self._vm_points.values():
+                values[cells] = compat.evaluate_expression(expr, mesh, cells)
+        return StressSamples(values, self._sample_weights, self._sample_points)

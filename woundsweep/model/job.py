@@ -1,15 +1,18 @@
 """One job through the stages: stress statistics, `StageResult` rows and the HDF5 output.
 
-Stress statistics of a stage (von Mises of sigma = J^-1 P F^T, paper eq. 20; constant per
-P1 cell):
+Stress statistics of a stage (von Mises of sigma = J^-1 P F^T, paper eq. 20), over the
+samples of `WoundForms.von_mises_samples` (a P1 cell's constant value; a P2 cell's values at
+the points of a degree-4 rule, each holding its weight's share of the cell's volume):
 
-- ``p99_von_mises_kPa``, the "maximal stress": the 99th percentile weighted by cell volume,
-  i.e. the smallest cell value v such that cells with von Mises <= v hold at least 99% of
-  the reference volume (independent of how finely the mesh is graded);
+- ``p99_von_mises_kPa``, the "maximal stress": the volume-weighted 99th percentile, i.e. the
+  smallest sample value v such that samples with von Mises <= v hold at least 99% of the
+  reference volume (independent of how finely the mesh is graded);
 - ``p99_von_mises_nodal_kPa``: the unweighted 99th percentile (numpy's linear interpolation)
-  over nodal values, each the volume-weighted mean of the cells around the node; this is
-  close to what the paper's code measured, for comparison only;
-- ``max_von_mises_kPa`` and the reference-coordinate midpoint of that cell.
+  over nodal values, each the volume-weighted mean of the cell means around the node; this
+  is close to what the paper's code measured, for comparison only;
+- ``max_von_mises_kPa``, the largest sample, and its reference coordinates.
+
+The stored field and the profiles are cell means.
 
 The output file's layout is `woundsweep.solverfile`'s: the reported stages' `StageResult`
 fields plus diagnostics, the mesh in the input numbering, and the fields of every converged
@@ -21,7 +24,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
@@ -29,6 +32,9 @@ from ..errors import GeometryError, SolverError, WoundsweepError
 from ..schema import ExitCode, StageResult, StageStatus
 from ..solver.settings import NewtonSettings
 from .profiles import line_maxima, locate_cells, profile_lines, sample_profiles
+
+if TYPE_CHECKING:
+    from .forms import StressSamples
 
 __all__ = [
     "JobOutcome",
@@ -78,9 +84,19 @@ def _weighted_quantile(values: np.ndarray, weights: np.ndarray, q: float) -> flo
 
 
 def stress_summary(
-    vm: np.ndarray, volumes: np.ndarray, cell_nodes: np.ndarray, midpoints: np.ndarray
+    vm: np.ndarray,
+    volumes: np.ndarray,
+    cell_nodes: np.ndarray,
+    midpoints: np.ndarray,
+    samples: StressSamples | None = None,
+    corners: np.ndarray | None = None,
 ) -> dict[str, float]:
-    """Volume-weighted and nodal p99, maximum and its location (see the module docstring)."""
+    """Volume-weighted and nodal p99, maximum and its location (see the module docstring).
+
+    ``vm`` are cell means; ``samples`` (with the cells' vertex coordinates ``corners``,
+    (cells, 4, 3)) replace them for p99 and the maximum. Without samples each cell is one
+    sample at its midpoint.
+    """
     vm = np.asarray(vm, dtype=float)
     volumes = np.asarray(volumes, dtype=float)
     n_nodes = int(cell_nodes.max()) + 1
@@ -90,14 +106,25 @@ def stress_summary(
         np.add.at(num, cell_nodes[:, j], vm * volumes)
         np.add.at(den, cell_nodes[:, j], volumes)
     nodal = num[den > 0] / den[den > 0]
-    i = int(np.argmax(vm))
+    if samples is None or corners is None:
+        values, weights = vm[:, None], volumes[:, None]
+    else:
+        values = np.asarray(samples.values, dtype=float)
+        weights = volumes[:, None] * np.asarray(samples.weights, dtype=float)[None, :]
+    flat = int(np.argmax(values))
+    i, j = divmod(flat, values.shape[1])
+    if samples is None or corners is None:
+        where = np.asarray(midpoints[i], dtype=float)
+    else:
+        c = np.asarray(corners[i], dtype=float)
+        where = c[0] + (c[1:] - c[0]).T @ np.asarray(samples.points[j], dtype=float)
     return {
-        "p99_von_mises_kPa": _weighted_quantile(vm, volumes, 0.99),
+        "p99_von_mises_kPa": _weighted_quantile(values.ravel(), weights.ravel(), 0.99),
         "p99_von_mises_nodal_kPa": float(np.percentile(nodal, 99)),
-        "max_von_mises_kPa": float(vm[i]),
-        "max_location_x_mm": float(midpoints[i, 0]),
-        "max_location_y_mm": float(midpoints[i, 1]),
-        "max_location_z_mm": float(midpoints[i, 2]),
+        "max_von_mises_kPa": float(values[i, j]),
+        "max_location_x_mm": float(where[0]),
+        "max_location_y_mm": float(where[1]),
+        "max_location_z_mm": float(where[2]),
     }
 
 
@@ -142,9 +169,12 @@ def run_stages(
         s = out.solve
         ok = s.status == StageStatus.CONVERGED
         vm = model.forms.von_mises_cells() if ok else None
-        stats: dict[str, float] = (
-            stress_summary(vm, d.volumes, d.cell_vertices, d.midpoints) if ok else {}
-        )
+        stats: dict[str, float] = {}
+        if ok:
+            samples = model.forms.von_mises_samples()
+            stats = stress_summary(
+                vm, d.volumes, d.cell_vertices, d.midpoints, samples, d.X[d.cell_vertices]
+            )
         gap = out.diagnostics.get("closure_gap_mm")
         contact = {
             key: _finite(out.diagnostics[key])

@@ -428,3 +428,14 @@ def test_fingerprint_covers_what_determines_a_result(run_dir: Path) -> None:
     assert result_fingerprint(parse_sweep({**doc, "name": "other"}), job) == base
     other = run.manifest[run.manifest["skin_type"] == "soft"].iloc[0]
     assert result_fingerprint(run.sweep, other) != base
+
+
+def test_fingerprint_covers_the_statistics_version(run_dir: Path, monkeypatch) -> None:
+    """Results whose stress statistics were computed another way are stale."""
+    from woundsweep.sweep import identity
+
+    run = load_run(run_dir)
+    job = run.manifest.iloc[0]
+    base = identity.result_fingerprint(run.sweep, job)
+    monkeypatch.setattr(identity, "STATISTICS_VERSION", identity.STATISTICS_VERSION + 1)
+    assert identity.result_fingerprint(run.sweep, job) != base

@@ -20,6 +20,7 @@ __all__ = [
     "DERMIS",
     "FACET_TAGS",
     "STAGES",
+    "STATISTICS_VERSION",
     "STAGE_NAMES",
     "SUBCUTIS",
     "TAGS",
@@ -39,6 +40,11 @@ __all__ = [
     "parse_stage_range",
     "stage_field_kinds",
 ]
+
+# How the stored stress statistics are computed (docs/model.md, "Stress statistics"; 2: P2
+# cells sampled at a degree-4 rule's points). Part of a result's fingerprint, so results
+# computed another way read as stale and are run again.
+STATISTICS_VERSION = 2
 
 UNITS = "mm, kPa, mN, s"
 

@@ -4,8 +4,8 @@
 change of materials or settings. `result_fingerprint` is the sha256 of the canonical JSON of
 everything that determines the job's numbers: its parameters (geometry, skin type,
 orientation), the material values it uses (the subcutis and its own skin type's set, not just
-the name), the stage and solver settings, the mesh law's version and the result format's
-version. A stored result whose fingerprint differs from the current sweep's is stale.
+the name), the stage and solver settings, the mesh law's version, the stress statistics' version and
+the result format's version. A stored result whose fingerprint differs from the current sweep's is stale.
 `file_sha256` is the content checksum of the fields and mesh files recorded with a result.
 """
 
@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from ..mesh.sizing import MESH_LAW_VERSION
+from ..schema import STATISTICS_VERSION
 from .grid import GEOMETRY_KEYS
 
 __all__ = ["FORMAT_VERSION", "file_sha256", "fingerprints", "result_fingerprint"]
@@ -57,6 +58,7 @@ def result_fingerprint(settings: Mapping[str, Any], job: Mapping[str, Any]) -> s
     doc = {
         "format": FORMAT_VERSION,
         "mesh_law": MESH_LAW_VERSION,
+        "statistics": STATISTICS_VERSION,
         "job": {k: _plain(job[k]) for k in _JOB_KEYS},
         "materials": {
             "subcutis": _plain(materials["subcutis"]),

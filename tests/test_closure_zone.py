@@ -50,6 +50,17 @@ def meshes() -> dict[tuple[str, float], MeshData]:
     return {(s, m): build_mesh(shape_spec(s, m)) for s in ("cylindrical", "wedge") for m in FACTORS}
 
 
+@pytest.mark.parametrize("m", (0.3, 0.7))
+@pytest.mark.parametrize("shape", ["cylindrical", "wedge"])
+def test_p2_meshes_zone_area_is_exact_within_one_percent(shape: str, m: float) -> None:
+    """P2 meshes (edges twice as long) still carry the zone as geometry."""
+    spec = GeometrySpec(**(shape_spec(shape, m).to_dict() | {"element_degree": 2}))
+    mesh = build_mesh(spec)
+    area = tri_areas(mesh.points, mesh.facets[mesh.facet_tags == WOUND_ZONE]).sum()
+    assert area == pytest.approx(exact_zone_area(spec), rel=1e-2)
+    assert mesh.info["cells"] < build_mesh(shape_spec(shape, m)).info["cells"]
+
+
 @pytest.mark.parametrize("m", FACTORS)
 @pytest.mark.parametrize("shape", ["cylindrical", "wedge"])
 def test_zone_area_is_exact_within_one_percent(meshes, shape: str, m: float) -> None:
@@ -148,3 +159,8 @@ def test_from_row_takes_the_sweeps_zone() -> None:
     assert (spec.zone_y_fraction, spec.zone_depth_fraction) == (0.5, 0.25)
     assert GeometrySpec.from_row(row) == GeometrySpec.wedge(1.0, 1.0, 2.0, 1.0, 0.6, 0.3)
     assert "zone=0.5,0.25" in spec.describe()
+    p2 = GeometrySpec.from_row(row, None, 2)
+    assert p2.element_degree == 2 and p2.describe().endswith(" P2")
+    for bad in (0, 3, 1.5, True):
+        with pytest.raises(GeometryError, match="element_degree"):
+            GeometrySpec.from_row(row, None, bad)

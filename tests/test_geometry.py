@@ -277,6 +277,13 @@ def test_size_law_is_finer_in_dermis_near_wound_and_with_larger_factor() -> None
         assert mesh_size_mm(finer, x, 0.0, z) < mesh_size_mm(spec, x, 0.0, z)
 
 
+def test_size_law_sets_node_spacing_so_p2_edges_are_twice_p1s() -> None:
+    p1 = GeometrySpec.cylindrical(1.0, 2.0, 9.0, 2.7, 0.1, 0.5)
+    p2 = GeometrySpec(**(p1.to_dict() | {"element_degree": 2}))
+    for x, z in [(-0.05, -0.1), (-3.0, -1.0), (-6.0, -2.9), (1.3, -0.2)]:
+        assert mesh_size_mm(p2, x, 0.0, z) == pytest.approx(2.0 * mesh_size_mm(p1, x, 0.0, z))
+
+
 def test_mesh_cells_are_smaller_in_dermis_than_in_subcutis(meshes: dict[str, MeshData]) -> None:
     mesh = meshes["wedge-dermis"]
     vol = tet_volumes(mesh)

@@ -136,6 +136,17 @@ def run_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return _run_dir(tmp_path_factory.mktemp("solve"))
 
 
+def test_job_spec_takes_the_sweeps_element_degree(tmp_path: Path) -> None:
+    """A P2 sweep's meshes are P2 meshes (edges twice as long); the mesh cache tells them apart."""
+    from woundsweep.model.job import job_row, job_spec
+    from woundsweep.sweep.grid import load_run
+
+    for degree in (1, 2):
+        (tmp_path / str(degree)).mkdir()
+        run = load_run(_run_dir(tmp_path / str(degree), {"element_degree": degree}))
+        assert job_spec(run, job_row(run, 0)).element_degree == degree
+
+
 @pytest.mark.fem
 def test_solve_writes_the_design_output(run_dir: Path, capsys: pytest.CaptureFixture) -> None:
     import h5py

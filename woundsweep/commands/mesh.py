@@ -68,10 +68,12 @@ def write_vtu(path: str | Path, mesh: MeshData) -> None:
     atomic_write(path, _write)
 
 
-def mesh_geometry(run_dir: Path, row: pd.Series, zone: ClosureZone | None = None) -> CachedMesh:
+def mesh_geometry(
+    run_dir: Path, row: pd.Series, zone: ClosureZone | None = None, element_degree: int = 1
+) -> CachedMesh:
     """Build or reuse the mesh of the geometry of manifest ``row`` with the sweep's closure
-    ``zone`` (errors name its job)."""
-    spec = GeometrySpec.from_row(row, zone)  # GeometryError names the job
+    ``zone`` and element degree (errors name its job)."""
+    spec = GeometrySpec.from_row(row, zone, element_degree)  # GeometryError names the job
     try:
         return get_mesh(run_dir, str(row["geometry_id"]), spec)
     except GeometryError as err:
@@ -124,8 +126,9 @@ def cmd(
     run = load_run(run_dir)
     man = run.manifest
     zone = ClosureZone.from_sweep(run.sweep.stages)
+    degree = int(run.sweep.solver.get("element_degree", 1))
     if all_:
-        _mesh_all(run.run_dir, man, zone)
+        _mesh_all(run.run_dir, man, zone, degree)
         return
     if job is not None:
         hit = man[man["job_index"] == job]
@@ -140,7 +143,7 @@ def cmd(
             f"no geometry {geometry_id!r} in {run_dir}", param_hint="--geometry"
         )
     row = hit.iloc[0] if job is not None else rows.iloc[0]
-    got = mesh_geometry(run.run_dir, row, zone)
+    got = mesh_geometry(run.run_dir, row, zone, degree)
     if got.status == "rebuilt":
         click.echo(f"cached mesh rejected ({got.reason}); rebuilt", err=True)
     click.echo(_line(str(geometry_id), rows, got))
@@ -149,12 +152,12 @@ def cmd(
         click.echo(f"wrote {out}")
 
 
-def _mesh_all(run_dir: Path, man: pd.DataFrame, zone: ClosureZone) -> None:
+def _mesh_all(run_dir: Path, man: pd.DataFrame, zone: ClosureZone, degree: int) -> None:
     groups = list(man.groupby("geometry_id", sort=False))
     cells, quality, status, failures = [], [], {"built": 0, "rebuilt": 0, "cached": 0}, []
     for gid, rows in tqdm(groups, desc="meshing", unit="geometry", leave=False):
         try:
-            got = mesh_geometry(run_dir, rows.iloc[0], zone)
+            got = mesh_geometry(run_dir, rows.iloc[0], zone, degree)
         except GeometryError as err:
             failures.append(f"geometry {gid}: {err}")
             continue

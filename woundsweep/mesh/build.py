@@ -363,7 +363,7 @@ def build_mesh(spec: GeometrySpec) -> MeshData:
         raise GeometryError(
             f"{spec.describe()}: degenerate or inverted cell (min SICN {min_q:.3g})"
         )
-    s = _size_scale(spec.mesh_size_factor)
+    s = _size_scale(spec.mesh_size_factor, spec.element_degree)
     info = {
         "cells": int(len(cells)),
         "vertices": int(len(points)),

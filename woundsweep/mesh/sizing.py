@@ -1,11 +1,18 @@
 """The mesh size law (version ``MESH_LAW_VERSION``): target edge length at a point (pure Python).
 
 With D the distance (mm) from the wound surface, zeta = max(0, -z - t_d) / t_d the depth
-below the layer interface in dermal thicknesses, m the mesh size factor and
-s = (0.5 / m)^(2/3)::
+below the layer interface in dermal thicknesses, m the mesh size factor,
+s = (0.5 / m)^(2/3) and p the element degree::
 
-    h = s * min(h_w + 0.5 D,  (0.7 t_d + 0.1 D) (1 + 0.75 zeta),  L / 4),
+    h = p * s * min(h_w + 0.5 D,  (0.7 t_d + 0.1 D) (1 + 0.75 zeta),  L / 4),
     h_w = min(t_d / 3, w / 6)
+
+The law sets the spacing of the displacement's nodes: a P2 element's edge holds a node at
+its midpoint, so P2 edges are twice as long as P1's for the same spacing, and a mesh size
+factor means the same resolution, and about the same number of nodes away from the
+geometry's fixed edges, for either element. (P2 on the P1 edge lengths has about 6.5 times
+the dofs and costs 10 to 30 times as much, for stresses within a few per cent of these;
+docs/model.md, "Element".)
 
 All lengths scale with the geometry, so the cell count depends (up to OCC's absolute
 tolerances) only on the dimensionless factors; every term scales with s, so a larger factor
@@ -29,9 +36,11 @@ from .spec import GeometrySpec, wound_distance_mm
 __all__ = ["MESH_LAW_VERSION", "PAPER_CELL_CAP", "SIZE_LAW", "mesh_size_mm"]
 
 # Bumped whenever the geometry or the size law changes (2: the closure zone is imprinted on
-# the wound surface): cached meshes of another version are rebuilt.
-MESH_LAW_VERSION = 2
-# The paper omitted models above 40,000 cells; the size law keeps every paper geometry below.
+# the wound surface; 3: edges scale with the element degree): cached meshes of another
+# version are rebuilt.
+MESH_LAW_VERSION = 3
+# The paper omitted models above 40,000 (P1) cells; the size law keeps every paper geometry
+# below, and a P2 mesh of the same geometry has fewer cells for about as many nodes.
 PAPER_CELL_CAP = 40_000
 
 # Constants of the size law in the module docstring.
@@ -50,8 +59,9 @@ SIZE_LAW: Mapping[str, float] = MappingProxyType(
 )
 
 
-def _size_scale(mesh_size_factor: float) -> float:
-    return (SIZE_LAW["reference_factor"] / mesh_size_factor) ** SIZE_LAW["factor_exponent"]
+def _size_scale(mesh_size_factor: float, element_degree: int = 1) -> float:
+    factor = (SIZE_LAW["reference_factor"] / mesh_size_factor) ** SIZE_LAW["factor_exponent"]
+    return element_degree * factor
 
 
 def _wound_size(spec: GeometrySpec) -> float:
@@ -72,4 +82,4 @@ def mesh_size_mm(spec: GeometrySpec, x: float, y: float, z: float) -> float:
         1.0 + SIZE_LAW["depth_growth"] * zeta
     )
     cap = SIZE_LAW["patch_fraction"] * spec.patch_half_length_mm
-    return _size_scale(spec.mesh_size_factor) * min(near, layer, cap)
+    return _size_scale(spec.mesh_size_factor, spec.element_degree) * min(near, layer, cap)

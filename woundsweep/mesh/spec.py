@@ -22,6 +22,7 @@ from dataclasses import asdict, dataclass
 from typing import Any
 
 from ..errors import GeometryError
+from ..model.element import DEGREES
 from ..model.parameters import ClosureZone
 
 __all__ = ["FINEST_FACTOR", "SHAPES", "GeometrySpec", "wound_distance_mm"]
@@ -40,7 +41,9 @@ class GeometrySpec:
     ``wound_depth_mm`` must equal R - a w. ``mesh_size_factor`` in (0, FINEST_FACTOR]: larger
     is finer (a sweep's grid stays in (0, 1]).
     ``zone_y_fraction`` and ``zone_depth_fraction`` in (0, 1] bound the closure zone
-    (|y| <= zone_y_fraction * L, z >= -zone_depth_fraction * d).
+    (|y| <= zone_y_fraction * L, z >= -zone_depth_fraction * d). ``element_degree`` is the
+    displacement element's (`woundsweep.model.element.DEGREES`): the size law sets the node
+    spacing, and an element's edges span ``element_degree`` spacings (`mesh.sizing`).
     """
 
     shape: str
@@ -53,6 +56,7 @@ class GeometrySpec:
     mesh_size_factor: float
     zone_y_fraction: float = ClosureZone.y_fraction
     zone_depth_fraction: float = ClosureZone.depth_fraction
+    element_degree: int = 1
 
     def __post_init__(self) -> None:
         _validate(self)
@@ -104,12 +108,15 @@ class GeometrySpec:
         )
 
     @classmethod
-    def from_row(cls, row: Mapping[str, Any] | Any, zone: Any = None) -> GeometrySpec:
+    def from_row(
+        cls, row: Mapping[str, Any] | Any, zone: Any = None, element_degree: int = 1
+    ) -> GeometrySpec:
         """Build from a manifest row (pandas Series or dict with the manifest columns).
 
         ``zone`` (an object with ``y_fraction`` and ``depth_fraction``, e.g. the sweep's
-        `ClosureZone`) sets the closure zone; None keeps the defaults. Errors name the job
-        (``job_index``) when the row has one.
+        `ClosureZone`) sets the closure zone; None keeps the defaults. ``element_degree`` is
+        the sweep's ``solver.element_degree``. Errors name the job (``job_index``) when the
+        row has one.
         """
         get = row.get
         shape = get("wound_shape", get("shape"))
@@ -127,7 +134,9 @@ class GeometrySpec:
                 _num(get("wound_depth_mm")),
                 aspect,
                 _num(get("mesh_size_factor")),
-                *(() if zone is None else (float(zone.y_fraction), float(zone.depth_fraction))),
+                float(ClosureZone.y_fraction if zone is None else zone.y_fraction),
+                float(ClosureZone.depth_fraction if zone is None else zone.depth_fraction),
+                element_degree,
             )
         except (GeometryError, TypeError, ValueError) as err:
             job = get("job_index")
@@ -167,6 +176,7 @@ class GeometrySpec:
             f"{self.shape} t_d={self.dermal_thickness_mm:g} t_s={self.subcutis_thickness_mm:g} "
             f"L={self.patch_half_length_mm:g} w={self.wound_width_mm:g} "
             f"d={self.wound_depth_mm:.4g}{aspect} m={self.mesh_size_factor:g}{zone_text}"
+            f"{'' if self.element_degree == 1 else f' P{self.element_degree}'}"
         )
 
 
@@ -195,6 +205,8 @@ def _validate(spec: GeometrySpec) -> None:
         raise GeometryError(
             f"mesh_size_factor={m!r} must be in (0, {FINEST_FACTOR:g}] (larger is finer)"
         )
+    if spec.element_degree not in DEGREES or isinstance(spec.element_degree, bool):
+        raise GeometryError(f"element_degree={spec.element_degree!r} must be one of {DEGREES}")
     for name in ("zone_y_fraction", "zone_depth_fraction"):
         v = getattr(spec, name)
         if not isinstance(v, (int, float)) or not math.isfinite(v) or not 0 < v <= 1:

@@ -118,7 +118,7 @@ def convergence_study(
         level_rows.append(
             {
                 "mesh_size_factor": m,
-                "relative_size": _size_scale(m),
+                "relative_size": _size_scale(m, spec.element_degree),
                 "cells": int(mesh.info["cells"]),
                 "stages": {
                     str(rec.result.stage): _stage_values(rec)

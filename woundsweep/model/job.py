@@ -265,11 +265,13 @@ def job_row(run: Any, job_index: int) -> Any:
 
 
 def job_spec(run: Any, row: Any) -> Any:
-    """The `GeometrySpec` of a manifest row with the sweep's closure zone (part of the mesh)."""
+    """The `GeometrySpec` of a manifest row with the sweep's closure zone and element degree
+    (both part of the mesh)."""
     from ..mesh.spec import GeometrySpec
     from .parameters import ClosureZone
 
-    return GeometrySpec.from_row(row, ClosureZone.from_sweep(run.sweep.stages))
+    zone = ClosureZone.from_sweep(run.sweep.stages)
+    return GeometrySpec.from_row(row, zone, int(run.sweep.solver.get("element_degree", 1)))
 
 
 def job_model(run: Any, row: Any, mesh: Any, jit: dict[str, Any] | None = None) -> tuple[Any, Any]:

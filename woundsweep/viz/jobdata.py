@@ -122,9 +122,10 @@ def _mesh_arrays(run_dir: Path, job: dict[str, Any], groups: dict[str, Any], mes
 
 def _cached_mesh(run_dir: Path, job: dict[str, Any]) -> Any:
     from ..mesh.cache import get_mesh
-    from ..mesh.spec import GeometrySpec
+    from ..model.job import job_spec
+    from ..sweep.grid import load_run
 
-    return get_mesh(run_dir, str(job["geometry_id"]), GeometrySpec.from_row(job))
+    return get_mesh(run_dir, str(job["geometry_id"]), job_spec(load_run(run_dir), job))
 
 
 def _boundary(run_dir: Path, job: dict[str, Any], points: np.ndarray, cells: np.ndarray):

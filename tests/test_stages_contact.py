@@ -157,6 +157,33 @@ def test_the_zone_tie_holds_the_flanks_at_45_degrees(cylinder_mesh) -> None:
     assert fd == pytest.approx(float(R @ v), rel=1e-4)
 
 
+def test_unconverged_stage_3_does_not_stop_stages_4_to_6(cylinder_mesh) -> None:
+    """Stage 4 restarts from stage 2: with stage 3 starved, stages 4-6 run and give the
+    results of a run whose stage 3 converged."""
+    from woundsweep.model.job import run_stages
+    from woundsweep.model.materials import JobMaterials
+    from woundsweep.model.stages import WoundModel
+    from woundsweep.solver.newton import MAX_ITERATIONS, NewtonSolver
+
+    mats = JobMaterials.table2("stiff", 0.0)
+    full = run_stages(WoundModel(cylinder_mesh), mats, 6)
+    m = WoundModel(cylinder_mesh)
+    real_run_stage, normal = m.run_stage, m.newton
+
+    def starved(stage: int):
+        starve = dataclasses.replace(m.settings, max_iterations=1, max_load_cuts=0, path_rtol=0.0)
+        m.newton = NewtonSolver(m.problem, m.problem.A, starve) if stage == 3 else normal
+        return real_run_stage(stage)
+
+    m.run_stage = starved  # type: ignore[method-assign]
+    recs = run_stages(m, mats, 6)
+    assert [r.result.status for r in recs] == [CONVERGED] * 2 + [MAX_ITERATIONS] + [CONVERGED] * 3
+    assert recs[2].displacement_mm is None
+    for a, b in zip(full[3:], recs[3:]):
+        assert b.result.p99_von_mises_kPa == pytest.approx(a.result.p99_von_mises_kPa, rel=1e-6)
+        assert b.result.contact_force_mN == pytest.approx(a.result.contact_force_mN, rel=1e-6)
+
+
 def test_unconverged_contact_stage_is_recorded_as_such(cylinder_mesh) -> None:
     from woundsweep.model.job import run_stages
     from woundsweep.model.materials import JobMaterials

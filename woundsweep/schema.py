@@ -39,6 +39,7 @@ __all__ = [
     "StageStatus",
     "parse_stage_range",
     "stage_field_kinds",
+    "start_stage",
 ]
 
 # How the stored stress statistics are computed (docs/model.md, "Stress statistics"; 2: P2
@@ -70,6 +71,16 @@ FACET_TAGS = MappingProxyType(
 TAGS = MappingProxyType({**CELL_TAGS, **FACET_TAGS})
 
 STAGES = (1, 2, 3, 4, 5, 6)
+# Stage 4 restarts from stage 2's Dirichlet-closed state (docs/model.md, "The six stages"), so
+# a stage 3 that does not converge does not stop stages 4-6.
+_RESTARTS = MappingProxyType({4: 2})
+
+
+def start_stage(stage: int) -> int:
+    """The stage whose converged state ``stage`` starts from (0 for stage 1)."""
+    return _RESTARTS.get(stage, stage - 1)
+
+
 STAGE_NAMES = MappingProxyType(
     {
         1: "pre-tension (Dirichlet lateral)",

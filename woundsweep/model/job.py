@@ -29,7 +29,7 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 import numpy as np
 
 from ..errors import GeometryError, SolverError, WoundsweepError
-from ..schema import ExitCode, StageResult, StageStatus
+from ..schema import ExitCode, StageResult, StageStatus, start_stage
 from ..solver.settings import NewtonSettings
 from .profiles import line_maxima, locate_cells, profile_lines, sample_profiles
 
@@ -149,8 +149,10 @@ def run_stages(
     last_stage: int,
     echo: Callable[[StageRecord], None] | None = None,
 ) -> list[StageRecord]:
-    """Run stages 1..last_stage on a `woundsweep.model.WoundModel`; stop after an unconverged
-    stage. Returns one record per stage 1..last_stage (``not-run`` after a failure).
+    """Run stages 1..last_stage on a `woundsweep.model.WoundModel`. A stage runs when the
+    stage before it ran and the stage it starts from (`schema.start_stage`) converged, so an
+    unconverged stage 3 does not stop stages 4-6. Returns one record per stage
+    1..last_stage (``not-run`` for a stage that could not run).
     """
     model.set_materials(materials)
     d = model.domain
@@ -160,9 +162,11 @@ def run_stages(
     lines = profile_lines(d.X)
     line_cells = locate_cells(d, lines.reshape(-1, 3)).reshape(lines.shape[:2])
     records: list[StageRecord] = []
-    failed = False
+    status = {0: StageStatus.CONVERGED}
     for k in range(1, last_stage + 1):
-        if failed:
+        ran = k == 1 or status[k - 1] != StageStatus.NOT_RUN
+        if not ran or status[start_stage(k)] != StageStatus.CONVERGED:
+            status[k] = StageStatus.NOT_RUN
             records.append(StageRecord(StageResult(k, StageStatus.NOT_RUN), {}, None, None))
             continue
         out = model.run_stage(k)
@@ -216,7 +220,7 @@ def run_stages(
         records.append(rec)
         if echo is not None:
             echo(rec)
-        failed = not ok
+        status[k] = s.status
     return records
 
 

@@ -25,7 +25,7 @@ import numpy as np
 import scipy.sparse
 
 from ..contact import GPA_TO_KPA, ContactModel, FlankContact, ZoneTie, split_wound_flanks
-from ..schema import DERMIS, STAGES, SUBCUTIS, StageStatus
+from ..schema import DERMIS, STAGES, SUBCUTIS, StageStatus, start_stage
 from ..solver.continuation import ContinuationResult, LoadState, continuation
 from ..solver.newton import NewtonSolver, Policy
 from ..solver.settings import NewtonSettings
@@ -353,9 +353,9 @@ class WoundModel:
         k_from = CONTACT_START_kPa if stage == 4 else self.contact_penalty_kPa[stage - 5]
         k_from = min(k_from, k_to)
         if stage == 4:
-            u[:] = self.displacements[2]
+            u[:] = self.displacements[start_stage(4)]
             # The closure traction becomes a dead load on the stage-2 area (docs/model.md).
-            self.forms.u_area.x.array[:] = self.displacements[2]
+            self.forms.u_area.x.array[:] = self.displacements[start_stage(4)]
             self.forms.follow.value = 0.0
             if self.tie is not None:  # the closed zone is tied where stage 2 closed it
                 self.tie.set_reference(u)

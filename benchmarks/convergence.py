@@ -9,13 +9,13 @@ RUN_DIR is a run generated from sweeps/paper.yaml (``woundsweep generate sweeps/
 shapes, the smallest and the largest patch (patch factors 1 and 3), 0 and 45 degrees, with
 t_d = 1 mm, f_s = 1, f_w = 0.3, normal skin (cylinders a = 0.1, wedges f_d = 0.5). Each job
 is solved with ``woundsweep converge RUN_DIR --job N --factors ...`` (its JSON and figure
-land under RUN_DIR/convergence/; with P2 5-30 minutes per job on one core at the paper's
-three factors, most of it the finest level; a level at m = 1 costs as much again or more). The summary prints, per job
+land under RUN_DIR/convergence/; with P2 one to three minutes per job on one core at the paper's three
+factors, most of it the finest level). The summary prints, per job
 and stage, p99 at each level, the finest triple's extrapolated value, the largest deviation
 of the paper's factors (0.3, 0.5, 0.7) from it, their spread (max - min) / mean, the kind
 of convergence and the observed order, then the stage-2 closure force the same way, and
 counts the stages 1, 2 and 4-6 within 5 % with monotone convergence, and with a spread
-within 5 %. Not part of ``make bench`` (it takes about an hour).
+within 5 %. Not part of ``make bench`` (it takes about a quarter of an hour).
 """
 
 from __future__ import annotations

@@ -105,6 +105,7 @@ def test_p2_stress_samples_match_the_materials_at_their_points(p2_box) -> None:
             F = np.eye(3) + G
             want = von_mises(first_piola(material, F), F)
             assert samples.values[c, k] == pytest.approx(want, rel=1e-9)
+            assert samples.det_F[c, k] == pytest.approx(np.linalg.det(F), rel=1e-12)
     s = stress_summary(
         m.forms.von_mises_cells(), d.volumes, d.cell_vertices, d.midpoints, samples, corners
     )

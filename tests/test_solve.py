@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 import os
 import subprocess
 import sys
@@ -98,6 +99,31 @@ def test_p99_and_maximum_over_samples() -> None:
         ]
         == 20.0
     )
+
+
+def test_samples_without_stress_are_left_out() -> None:
+    """A sample with det F <= 0 (or no finite value) holds no stress: p99 and the maximum
+    come from the others; with none left they are NaN."""
+    from woundsweep.model.forms import StressSamples
+
+    cells = np.array([[0, 1, 2, 3], [4, 1, 2, 3]])
+    vol, mid = np.array([1.0, 1.0]), np.zeros((2, 3))
+    corners = np.array([np.eye(4)[:, :3]] * 2)
+    points = np.array([[0.1, 0.2, 0.3], [0.25, 0.25, 0.25]])
+    values = np.array([[10.0, 900.0], [20.0, np.nan]])
+    det_F = np.array([[0.9, -0.1], [0.8, 0.7]])
+    s = stress_summary(
+        np.array([1.0, 2.0]),
+        vol,
+        cells,
+        mid,
+        StressSamples(values, np.ones(2) / 2, points, det_F),
+        corners,
+    )
+    assert s["max_von_mises_kPa"] == 20.0 and s["p99_von_mises_kPa"] == 20.0
+    none = StressSamples(values, np.ones(2) / 2, points, -np.ones((2, 2)))
+    s = stress_summary(np.array([1.0, 2.0]), vol, cells, mid, none, corners)
+    assert math.isnan(s["p99_von_mises_kPa"]) and math.isnan(s["max_von_mises_kPa"])
 
 
 def test_parse_stage_range() -> None:

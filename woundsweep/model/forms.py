@@ -34,12 +34,14 @@ class StressSamples(NamedTuple):
     """Von Mises (kPa) at reference points of every cell, mesh cell order.
 
     ``values`` (cells, k); ``weights`` (k,), summing to 1 (a point's share of its cell's
-    volume); ``points`` (k, 3) on the reference tetrahedron.
+    volume); ``points`` (k, 3) on the reference tetrahedron; ``det_F`` (cells, k), det F at
+    the points (None for P1, whose det F is the domain's per cell).
     """
 
     values: np.ndarray
     weights: np.ndarray
     points: np.ndarray
+    det_F: np.ndarray | None = None
 
 
 def _constant(mesh: Any, value: Any) -> dolfinx.fem.Constant:
@@ -130,9 +132,11 @@ class WoundForms:
         self.Pi_form = compat.compile_form(Pi, jit_opts)
         # P1's stress is constant per cell: its one sample is the cell value.
         self._vm_points: dict[int, Any] = {}
+        self._det_points: Any = None
         self._sample_points, weights = np.full((1, 3), 0.25), np.ones(1)
         if domain.degree > 1:
             self._sample_points, weights = compat.quadrature_rule(STRESS_RULE_DEGREE)
+            self._det_points = compat.compile_expression(ufl.det(F), self._sample_points, jit_opts)
             for tag, expr in ((DERMIS, vm_d), (SUBCUTIS, vm_s)):
                 self._vm_points[tag] = (
                     domain.cell_mt.indices[domain.cell_mt.values == tag],
@@ -168,10 +172,13 @@ class WoundForms:
     def von_mises_samples(self) -> StressSamples:
         """Von Mises at the stress rule's points of every cell (P1: the cell values)."""
         if not self._vm_points:
-            values = self.von_mises_cells()[:, None]
-        else:
-            values = np.empty((len(self._volumes), len(self._sample_weights)))
-            mesh = self.u.function_space.mesh
-            for cells, expr in self._vm_points.values():
-                values[cells] = compat.evaluate_expression(expr, mesh, cells)
-        return StressSamples(values, self._sample_weights, self._sample_points)
+            return StressSamples(
+                self.von_mises_cells()[:, None], self._sample_weights, self._sample_points
+            )
+        values = np.empty((len(self._volumes), len(self._sample_weights)))
+        mesh = self.u.function_space.mesh
+        for cells, expr in self._vm_points.values():
+            values[cells] = compat.evaluate_expression(expr, mesh, cells)
+        every = np.arange(len(self._volumes), dtype=np.int32)
+        det_F = compat.evaluate_expression(self._det_points, mesh, every)
+        return StressSamples(values, self._sample_weights, self._sample_points, det_F)

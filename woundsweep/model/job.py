@@ -83,6 +83,15 @@ def _weighted_quantile(values: np.ndarray, weights: np.ndarray, q: float) -> flo
     return float(values[order][min(k, len(order) - 1)])
 
 
+_STRESS_KEYS = (
+    "p99_von_mises_kPa",
+    "max_von_mises_kPa",
+    "max_location_x_mm",
+    "max_location_y_mm",
+    "max_location_z_mm",
+)
+
+
 def stress_summary(
     vm: np.ndarray,
     volumes: np.ndarray,
@@ -95,7 +104,8 @@ def stress_summary(
 
     ``vm`` are cell means; ``samples`` (with the cells' vertex coordinates ``corners``,
     (cells, 4, 3)) replace them for p99 and the maximum. Without samples each cell is one
-    sample at its midpoint.
+    sample at its midpoint. A sample with det F <= 0 (a P2 cell inverted inside) has no
+    stress and is left out; the stage's ``min_J`` reports it.
     """
     vm = np.asarray(vm, dtype=float)
     volumes = np.asarray(volumes, dtype=float)
@@ -111,6 +121,16 @@ def stress_summary(
     else:
         values = np.asarray(samples.values, dtype=float)
         weights = volumes[:, None] * np.asarray(samples.weights, dtype=float)[None, :]
+        valid = np.isfinite(values)
+        if samples.det_F is not None:
+            valid &= np.asarray(samples.det_F) > 0
+        values = np.where(valid, values, -np.inf)
+        weights = np.where(valid, weights, 0.0)
+    keep = weights.ravel() > 0
+    if not keep.any():  # every sample inverted: no stress to report
+        return {key: math.nan for key in _STRESS_KEYS} | {
+            "p99_von_mises_nodal_kPa": float(np.percentile(nodal, 99))
+        }
     flat = int(np.argmax(values))
     i, j = divmod(flat, values.shape[1])
     if samples is None or corners is None:
@@ -119,7 +139,7 @@ def stress_summary(
         c = np.asarray(corners[i], dtype=float)
         where = c[0] + (c[1:] - c[0]).T @ np.asarray(samples.points[j], dtype=float)
     return {
-        "p99_von_mises_kPa": _weighted_quantile(values.ravel(), weights.ravel(), 0.99),
+        "p99_von_mises_kPa": _weighted_quantile(values.ravel()[keep], weights.ravel()[keep], 0.99),
         "p99_von_mises_nodal_kPa": float(np.percentile(nodal, 99)),
         "max_von_mises_kPa": float(values[i, j]),
         "max_location_x_mm": float(where[0]),
@@ -174,11 +194,14 @@ def run_stages(
         ok = s.status == StageStatus.CONVERGED
         vm = model.forms.von_mises_cells() if ok else None
         stats: dict[str, float] = {}
+        min_J = d.min_det(model.u)
         if ok:
             samples = model.forms.von_mises_samples()
             stats = stress_summary(
                 vm, d.volumes, d.cell_vertices, d.midpoints, samples, d.X[d.cell_vertices]
             )
+            if samples.det_F is not None:
+                min_J = min(min_J, float(samples.det_F.min()))
         gap = out.diagnostics.get("closure_gap_mm")
         contact = {
             key: _finite(out.diagnostics[key])
@@ -192,7 +215,7 @@ def run_stages(
             time_s=float(out.time_s),
             closure_gap_mm=_finite(gap) if gap is not None else None,
             interpenetrating=_interpenetrating(k, gap),
-            min_J=_finite(d.min_det(model.u)),
+            min_J=_finite(min_J),
             residual_norm=_finite(s.residual_norm),
             dofs=dofs,
             cells=cells,

@@ -45,7 +45,7 @@ def cmd(run_dir: Path, job: int | None, all_: bool, out: Path) -> None:
     if job is not None:
         row = job_row(run.manifest, job)
         rows = read_results(run.run_dir, [str(row["job_id"])])
-        info = export_job(load_job(run.run_dir, row, rows), out)
+        info = export_job(load_job(run, row, rows), out)
         stages = [s["stage"] for s in info["stages"] if s["file"]]
         where = out / f"job-{job}" / info["series"]
         click.echo(f"job {job}: stages {stages or 'none'} -> {where}")
@@ -59,7 +59,7 @@ def cmd(run_dir: Path, job: int | None, all_: bool, out: Path) -> None:
     n_stages, cache = 0, {}
     by_job = dict(tuple(results.groupby("job_id")))
     for row in tqdm(man.to_dict("records"), desc="export", unit="job", leave=False):
-        info = export_job(load_job(run.run_dir, row, by_job[row["job_id"]], cache), out)
+        info = export_job(load_job(run, row, by_job[row["job_id"]], cache), out)
         n_stages += sum(1 for s in info["stages"] if s["file"])
         reasons.update(s["not_exported"] for s in info["stages"] if s["not_exported"])
     pending = len(run.manifest) - len(man)

@@ -15,9 +15,8 @@ from ..errors import GeometryError
 from ..fsutil import atomic_write, check_output_file
 from ..mesh.build import MeshData
 from ..mesh.cache import CachedMesh, get_mesh
-from ..mesh.spec import GeometrySpec
-from ..model.parameters import ClosureZone
-from ..sweep.grid import load_run
+from ..model.job import job_spec
+from ..sweep.grid import Run, load_run
 
 __all__ = ["cmd", "mesh_geometry", "write_vtu"]
 
@@ -68,14 +67,12 @@ def write_vtu(path: str | Path, mesh: MeshData) -> None:
     atomic_write(path, _write)
 
 
-def mesh_geometry(
-    run_dir: Path, row: pd.Series, zone: ClosureZone | None = None, element_degree: int = 1
-) -> CachedMesh:
+def mesh_geometry(run: Run, row: pd.Series) -> CachedMesh:
     """Build or reuse the mesh of the geometry of manifest ``row`` with the sweep's closure
-    ``zone`` and element degree (errors name its job)."""
-    spec = GeometrySpec.from_row(row, zone, element_degree)  # GeometryError names the job
+    zone and element degree (errors name its job)."""
+    spec = job_spec(run, row)  # GeometryError names the job
     try:
-        return get_mesh(run_dir, str(row["geometry_id"]), spec)
+        return get_mesh(run.run_dir, str(row["geometry_id"]), spec)
     except GeometryError as err:
         raise GeometryError(f"job {int(row['job_index'])}: {err}") from None
 
@@ -125,10 +122,8 @@ def cmd(
             raise click.BadParameter(str(err), param_hint="--out") from None
     run = load_run(run_dir)
     man = run.manifest
-    zone = ClosureZone.from_sweep(run.sweep.stages)
-    degree = int(run.sweep.solver.get("element_degree", 1))
     if all_:
-        _mesh_all(run.run_dir, man, zone, degree)
+        _mesh_all(run, man)
         return
     if job is not None:
         hit = man[man["job_index"] == job]
@@ -143,7 +138,7 @@ def cmd(
             f"no geometry {geometry_id!r} in {run_dir}", param_hint="--geometry"
         )
     row = hit.iloc[0] if job is not None else rows.iloc[0]
-    got = mesh_geometry(run.run_dir, row, zone, degree)
+    got = mesh_geometry(run, row)
     if got.status == "rebuilt":
         click.echo(f"cached mesh rejected ({got.reason}); rebuilt", err=True)
     click.echo(_line(str(geometry_id), rows, got))
@@ -152,12 +147,12 @@ def cmd(
         click.echo(f"wrote {out}")
 
 
-def _mesh_all(run_dir: Path, man: pd.DataFrame, zone: ClosureZone, degree: int) -> None:
+def _mesh_all(run: Run, man: pd.DataFrame) -> None:
     groups = list(man.groupby("geometry_id", sort=False))
     cells, quality, status, failures = [], [], {"built": 0, "rebuilt": 0, "cached": 0}, []
     for gid, rows in tqdm(groups, desc="meshing", unit="geometry", leave=False):
         try:
-            got = mesh_geometry(run_dir, rows.iloc[0], zone, degree)
+            got = mesh_geometry(run, rows.iloc[0])
         except GeometryError as err:
             failures.append(f"geometry {gid}: {err}")
             continue

@@ -35,7 +35,7 @@ class StressSamples(NamedTuple):
 
     ``values`` (cells, k); ``weights`` (k,), summing to 1 (a point's share of its cell's
     volume); ``points`` (k, 3) on the reference tetrahedron; ``det_F`` (cells, k), det F at
-    the points (None for P1, whose det F is the domain's per cell).
+    the points (None: not known, every sample counts).
     """
 
     values: np.ndarray
@@ -130,19 +130,17 @@ class WoundForms:
         self.a_form = compat.compile_form(a, jit_opts)
         self.vm_form = compat.compile_form(vm, jit_opts)
         self.Pi_form = compat.compile_form(Pi, jit_opts)
-        # P1's stress is constant per cell: its one sample is the cell value.
+        # P1's stress is constant per cell: the cell values are its samples.
         self._vm_points: dict[int, Any] = {}
-        self._det_points: Any = None
-        self._sample_points, weights = np.full((1, 3), 0.25), np.ones(1)
         if domain.degree > 1:
             self._sample_points, weights = compat.quadrature_rule(STRESS_RULE_DEGREE)
+            self._sample_weights = weights / weights.sum()
             self._det_points = compat.compile_expression(ufl.det(F), self._sample_points, jit_opts)
             for tag, expr in ((DERMIS, vm_d), (SUBCUTIS, vm_s)):
                 self._vm_points[tag] = (
                     domain.cell_mt.indices[domain.cell_mt.values == tag],
                     compat.compile_expression(expr, self._sample_points, jit_opts),
                 )
-        self._sample_weights = weights / weights.sum()
         self.jit_time_s = time.perf_counter() - t0
         self._vm_vec = compat.create_vector(self.vm_form)
         self._dg0_cell = compat.cell_dofs(Q)[:, 0]
@@ -169,12 +167,11 @@ class WoundForms:
         integ = self._vm_vec.getArray(readonly=True)[self._dg0_cell]
         return integ / self._volumes
 
-    def von_mises_samples(self) -> StressSamples:
-        """Von Mises at the stress rule's points of every cell (P1: the cell values)."""
+    def von_mises_samples(self) -> StressSamples | None:
+        """Von Mises at the stress rule's points of every P2 cell; None for P1, whose
+        `von_mises_cells` are its samples."""
         if not self._vm_points:
-            return StressSamples(
-                self.von_mises_cells()[:, None], self._sample_weights, self._sample_points
-            )
+            return None
         values = np.empty((len(self._volumes), len(self._sample_weights)))
         mesh = self.u.function_space.mesh
         for cells, expr in self._vm_points.values():

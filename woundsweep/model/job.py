@@ -1,8 +1,9 @@
 """One job through the stages: stress statistics, `StageResult` rows and the HDF5 output.
 
 Stress statistics of a stage (von Mises of sigma = J^-1 P F^T, paper eq. 20), over the
-samples of `WoundForms.von_mises_samples` (a P1 cell's constant value; a P2 cell's values at
-the points of a degree-4 rule, each holding its weight's share of the cell's volume):
+samples of the stress (a P1 cell's constant value; a P2 cell's values at the points of a
+degree-4 rule, `WoundForms.von_mises_samples`, each holding its weight's share of the
+cell's volume):
 
 - ``p99_von_mises_kPa``, the "maximal stress": the volume-weighted 99th percentile, i.e. the
   smallest sample value v such that samples with von Mises <= v hold at least 99% of the
@@ -116,31 +117,27 @@ def stress_summary(
         np.add.at(num, cell_nodes[:, j], vm * volumes)
         np.add.at(den, cell_nodes[:, j], volumes)
     nodal = num[den > 0] / den[den > 0]
-    if samples is None or corners is None:
-        values, weights = vm[:, None], volumes[:, None]
-    else:
+    nodal_p99 = float(np.percentile(nodal, 99))
+    sampled = samples is not None and corners is not None
+    if sampled:
         values = np.asarray(samples.values, dtype=float)
         weights = volumes[:, None] * np.asarray(samples.weights, dtype=float)[None, :]
-        valid = np.isfinite(values)
-        if samples.det_F is not None:
-            valid &= np.asarray(samples.det_F) > 0
-        values = np.where(valid, values, -np.inf)
-        weights = np.where(valid, weights, 0.0)
-    keep = weights.ravel() > 0
-    if not keep.any():  # every sample inverted: no stress to report
-        return {key: math.nan for key in _STRESS_KEYS} | {
-            "p99_von_mises_nodal_kPa": float(np.percentile(nodal, 99))
-        }
-    flat = int(np.argmax(values))
-    i, j = divmod(flat, values.shape[1])
-    if samples is None or corners is None:
-        where = np.asarray(midpoints[i], dtype=float)
     else:
+        values, weights = vm[:, None], volumes[:, None]
+    valid = np.isfinite(values)
+    if sampled and samples.det_F is not None:
+        valid &= np.asarray(samples.det_F) > 0
+    if not valid.any():  # every sample inverted: no stress to report
+        return {key: math.nan for key in _STRESS_KEYS} | {"p99_von_mises_nodal_kPa": nodal_p99}
+    i, j = np.unravel_index(int(np.argmax(np.where(valid, values, -np.inf))), values.shape)
+    if sampled:
         c = np.asarray(corners[i], dtype=float)
         where = c[0] + (c[1:] - c[0]).T @ np.asarray(samples.points[j], dtype=float)
+    else:
+        where = np.asarray(midpoints[i], dtype=float)
     return {
-        "p99_von_mises_kPa": _weighted_quantile(values.ravel()[keep], weights.ravel()[keep], 0.99),
-        "p99_von_mises_nodal_kPa": float(np.percentile(nodal, 99)),
+        "p99_von_mises_kPa": _weighted_quantile(values[valid], weights[valid], 0.99),
+        "p99_von_mises_nodal_kPa": nodal_p99,
         "max_von_mises_kPa": float(values[i, j]),
         "max_location_x_mm": float(where[0]),
         "max_location_y_mm": float(where[1]),
@@ -196,11 +193,10 @@ def run_stages(
         stats: dict[str, float] = {}
         min_J = d.min_det(model.u)
         if ok:
-            samples = model.forms.von_mises_samples()
-            stats = stress_summary(
-                vm, d.volumes, d.cell_vertices, d.midpoints, samples, d.X[d.cell_vertices]
-            )
-            if samples.det_F is not None:
+            samples = model.forms.von_mises_samples()  # None on P1: the cells are the samples
+            corners = None if samples is None else d.X[d.cell_vertices]
+            stats = stress_summary(vm, d.volumes, d.cell_vertices, d.midpoints, samples, corners)
+            if samples is not None and samples.det_F is not None:
                 min_J = min(min_J, float(samples.det_F.min()))
         gap = out.diagnostics.get("closure_gap_mm")
         contact = {
@@ -291,6 +287,10 @@ def job_row(run: Any, job_index: int) -> Any:
     return manifest.loc[hit[0]]
 
 
+def _element_degree(run: Any) -> int:
+    return int(run.sweep.solver.get("element_degree", 1))
+
+
 def job_spec(run: Any, row: Any) -> Any:
     """The `GeometrySpec` of a manifest row with the sweep's closure zone and element degree
     (both part of the mesh)."""
@@ -298,7 +298,7 @@ def job_spec(run: Any, row: Any) -> Any:
     from .parameters import ClosureZone
 
     zone = ClosureZone.from_sweep(run.sweep.stages)
-    return GeometrySpec.from_row(row, zone, int(run.sweep.solver.get("element_degree", 1)))
+    return GeometrySpec.from_row(row, zone, _element_degree(run))
 
 
 def job_model(run: Any, row: Any, mesh: Any, jit: dict[str, Any] | None = None) -> tuple[Any, Any]:
@@ -314,11 +314,10 @@ def job_model(run: Any, row: Any, mesh: Any, jit: dict[str, Any] | None = None) 
         raise SolverError(f"job {job_index}: unknown skin type {skin!r}")
     materials = JobMaterials.from_sweep(run.sweep.materials, skin, angle)
     solver = run.sweep.solver
-    degree = int(solver.get("element_degree", 1))
     try:
         model = WoundModel(
             mesh,
-            element_degree=degree,
+            element_degree=_element_degree(run),
             quadrature_degree=int(solver.get("quadrature_degree", 1)),
             zone=ClosureZone.from_sweep(run.sweep.stages),
             settings=NewtonSettings.from_mapping(solver),

@@ -253,7 +253,7 @@ def build_atlas(
                 f"no stored fields (`run --fields {rows[0]['fields']}`, {rows[0]['failure_class']})"
             )
         elif j in views:
-            jf = load_job(run.run_dir, job, rows, cache)
+            jf = load_job(run, job, rows, cache)
         footer = "<h2>Log</h2>\n" + _log_html(run.run_dir / "logs" / f"job-{job['job_id']}.log")
         body = job_body(
             job, rows, jf, view_note=note, header=_nav(j, prev, nxt, has_analysis), footer=footer

@@ -97,14 +97,14 @@ def _read_h5(path: Path) -> tuple[dict[str, Any], dict[str, dict[str, np.ndarray
     return attrs, groups
 
 
-def _mesh_arrays(run_dir: Path, job: dict[str, Any], groups: dict[str, Any], mesh_file: str):
+def _mesh_arrays(run: Any, job: dict[str, Any], groups: dict[str, Any], mesh_file: str):
     if MESH_GROUP in groups:
         mesh = groups[MESH_GROUP]
     elif not groups:  # no fields stored (`run --fields none`, or no converged stage)
-        m = _cached_mesh(run_dir, job).mesh
+        m = _cached_mesh(run, job).mesh
         return m.points, m.cells, m.cell_tags
     else:
-        path = run_dir / "fields" / (mesh_file or f"mesh-{job['geometry_id']}.h5")
+        path = run.run_dir / "fields" / (mesh_file or f"mesh-{job['geometry_id']}.h5")
         if not path.exists():
             raise StoreError(f"{path}: the job's mesh file is missing")
         mesh = _read_h5(path)[1].get(MESH_GROUP)
@@ -120,17 +120,16 @@ def _mesh_arrays(run_dir: Path, job: dict[str, Any], groups: dict[str, Any], mes
         raise StoreError(f"the stored mesh of job {job['job_index']} lacks {err}") from None
 
 
-def _cached_mesh(run_dir: Path, job: dict[str, Any]) -> Any:
+def _cached_mesh(run: Any, job: dict[str, Any]) -> Any:
     from ..mesh.cache import get_mesh
     from ..model.job import job_spec
-    from ..sweep.grid import load_run
 
-    return get_mesh(run_dir, str(job["geometry_id"]), job_spec(load_run(run_dir), job))
+    return get_mesh(run.run_dir, str(job["geometry_id"]), job_spec(run, job))
 
 
-def _boundary(run_dir: Path, job: dict[str, Any], points: np.ndarray, cells: np.ndarray):
+def _boundary(run: Any, job: dict[str, Any], points: np.ndarray, cells: np.ndarray):
     """Facets and facet tags from the mesh cache (built if missing), checked against the store."""
-    got = _cached_mesh(run_dir, job)
+    got = _cached_mesh(run, job)
     m = got.mesh
     if m.points.shape != points.shape or m.cells.shape != cells.shape:
         raise StoreError(
@@ -145,18 +144,19 @@ def _boundary(run_dir: Path, job: dict[str, Any], points: np.ndarray, cells: np.
 
 
 def load_job(
-    run_dir: str | Path,
+    run: Any,
     job: dict[str, Any],
     rows: pd.DataFrame | list[dict[str, Any]],
     cache: dict[Any, Any] | None = None,
 ) -> JobFields:
     """Read the job's mesh and stored fields (the closure zone from the mesh's facet tags).
 
-    ``rows`` are the job's validated result rows (`read_results`); a job without a fields
+    ``run`` is the job's `grid.Run` (its sweep gives the meshes' closure zone and element
+    degree). ``rows`` are the job's validated result rows (`read_results`); a job without a fields
     file (failed early, or ``run --fields none``) gets the mesh and no fields. ``cache`` (a
     dict the caller keeps) holds the last geometry's mesh for the next job of that geometry.
     """
-    run_dir = Path(run_dir)
+    run_dir = run.run_dir
     rows = records(rows)
     if not rows:
         raise StoreError(f"job {job['job_index']} has no stored result yet (run `woundsweep run`)")
@@ -174,8 +174,8 @@ def load_job(
     if MESH_GROUP not in groups and cache is not None and key in cache:
         points, cells, cell_tags, facets, facet_tags, in_zone = cache[key]
     else:
-        points, cells, cell_tags = _mesh_arrays(run_dir, job, groups, mesh_file)
-        facets, facet_tags = _boundary(run_dir, job, points, cells)
+        points, cells, cell_tags = _mesh_arrays(run, job, groups, mesh_file)
+        facets, facet_tags = _boundary(run, job, points, cells)
         in_zone = closure_zone_facets(facet_tags)
         if MESH_GROUP not in groups and cache is not None:
             cache.clear()  # jobs come grouped by geometry: one mesh at a time
@@ -211,4 +211,4 @@ def open_job(run_dir: str | Path, job_index: int, cache: dict[Any, Any] | None =
     run = load_run(run_dir)
     job = job_row(run.manifest, job_index)
     rows = read_results(run.run_dir, [str(job["job_id"])])
-    return load_job(run.run_dir, job, rows, cache)
+    return load_job(run, job, rows, cache)

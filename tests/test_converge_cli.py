@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import yaml
 
-from woundsweep.model.gci import grid_study
+from woundsweep.model.gci import fit_study, grid_study
 
 SWEEP = {
     "name": "converge-test",
@@ -52,6 +52,7 @@ def test_converge_writes_levels_orders_and_a_figure(run_dir: Path, capsys) -> No
     assert cells[0] < cells[1] < cells[2]
     assert study["size_ratios"] == pytest.approx([1.3 ** (2 / 3)] * 2)
     assert sorted(study["studies"]) == ["1", "2", "3"]
+    assert study["fits"] == {} and study["fit_deviations"] == {}  # three levels: no fit
     assert "closure_traction_kPa" in study["studies"]["3"]
     assert "contact_force_mN" not in study["studies"]["3"]  # no contact before stage 4
     # The stored study is the GCI of the stored values (f1 the finest level).
@@ -73,26 +74,38 @@ def test_converge_writes_levels_orders_and_a_figure(run_dir: Path, capsys) -> No
 def test_converge_on_listed_factors_uses_their_unequal_ratios(run_dir: Path, capsys) -> None:
     from woundsweep.cli import main
 
-    factors = [0.2, 0.25, 0.34]
-    args = ["converge", str(run_dir), "--job", "0", "--factors", "0.2,0.25,0.34"]
+    factors = [0.2, 0.25, 0.3, 0.34]
+    args = ["converge", str(run_dir), "--job", "0", "--factors", "0.2,0.25,0.3,0.34"]
     assert main([*args, "--stages", "1-1"]) == 0
-    assert "dev %" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "dev %" in out and "least-squares fits over all levels" in out
     study = json.loads((run_dir / "convergence" / "job_0.json").read_text())
     levels = study["levels"]
     assert [lv["mesh_size_factor"] for lv in levels] == factors
     h = [(0.5 / m) ** (2 / 3) for m in factors]
-    assert study["size_ratios"] == pytest.approx([h[0] / h[1], h[1] / h[2]])
-    f3, f2, f1 = (lv["stages"]["1"]["p99_von_mises_kPa"] for lv in levels)
-    ref = grid_study(f1, f2, f3, h[1] / h[2], h[0] / h[1])
-    (s,) = study["studies"]["1"]["p99_von_mises_kPa"]
+    assert study["size_ratios"] == pytest.approx([a / b for a, b in zip(h, h[1:])])
+    values = [lv["stages"]["1"]["p99_von_mises_kPa"] for lv in levels]
+    f3, f2, f1 = values[-3:]
+    ref = grid_study(f1, f2, f3, h[2] / h[3], h[1] / h[2])
+    s = study["studies"]["1"]["p99_von_mises_kPa"][-1]  # the finest triple
     assert s["kind"] == ref.kind
     devs = study["deviations"]["1"]["p99_von_mises_kPa"]
     if ref.kind == "monotone":
-        assert devs == pytest.approx(
-            [(f - ref.extrapolated) / ref.extrapolated for f in (f3, f2, f1)]
-        )
+        assert devs == pytest.approx([(f - ref.extrapolated) / ref.extrapolated for f in values])
     else:
-        assert devs == [None, None, None]
+        assert devs == [None] * 4
+    # Four levels: the least-squares fit over all of them, as fit_study gives it.
+    fit = study["fits"]["1"]["p99_von_mises_kPa"]
+    want = fit_study(values, h)
+    assert fit["kind"] == want.kind and fit["fit"] == want.fit
+    for key in ("order", "extrapolated", "sigma"):
+        w = getattr(want, key)
+        assert (fit[key] is None and not math.isfinite(w)) or fit[key] == pytest.approx(w)
+    fit_devs = study["fit_deviations"]["1"]["p99_von_mises_kPa"]
+    if want.kind == "monotone":
+        f0 = want.extrapolated
+        assert fit_devs == pytest.approx([(f - f0) / f0 for f in values])
+        assert fit["uncertainty"] == pytest.approx(list(want.uncertainty))
 
 
 @pytest.mark.fem

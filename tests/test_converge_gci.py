@@ -8,7 +8,7 @@ import pytest
 
 from woundsweep.errors import WoundsweepError
 from woundsweep.model.convergence import level_factors, parse_factors
-from woundsweep.model.gci import SAFETY_FACTOR, grid_studies, grid_study
+from woundsweep.model.gci import SAFETY_FACTOR, fit_study, grid_studies, grid_study
 
 
 def sequence(f0: float, C: float, p: float, h1: float, r: float, n: int) -> list[float]:
@@ -132,3 +132,81 @@ def test_level_factors() -> None:
         with pytest.raises(WoundsweepError, match=text) as exc:
             level_factors(*args)
         assert exc.value.exit_code == 2 and "\n" not in str(exc.value)
+
+
+PAPER_AND_FINER = (0.3, 0.4, 0.5, 0.6, 0.7, 1.0, 1.4, 2.0)
+
+
+@pytest.mark.parametrize(("f0", "C", "p"), [(18.0, 9.0, 1.0), (6.0, -0.8, 2.0), (20.0, 3.0, 0.55)])
+def test_fit_recovers_a_power_law_on_unequal_ratios(f0, C, p) -> None:
+    h = [size_law(m) for m in PAPER_AND_FINER]
+    s = fit_study([f0 + C * x**p for x in h], h)
+    assert (s.kind, s.fit, s.safety_factor, s.scattered) == ("monotone", "power", 1.25, False)
+    assert s.order == pytest.approx(p, rel=1e-6)
+    assert s.extrapolated == pytest.approx(f0, rel=1e-8)
+    assert s.sigma == pytest.approx(0.0, abs=1e-8 * abs(C))
+    # On an exact law U_i is Fs times the true error of level i.
+    assert s.uncertainty == pytest.approx([1.25 * abs(C) * x**p for x in h], rel=1e-6)
+
+
+def test_fit_of_noisy_data_reports_its_scatter() -> None:
+    # A law plus alternating +-e: the fit keeps f0 and p near the law's and sigma near e.
+    h = [size_law(m) for m in PAPER_AND_FINER]
+    e = 0.02
+    values = [10.0 + 2.0 * x**1.5 + e * (-1) ** i for i, x in enumerate(h)]
+    triples = grid_studies(values, h)
+    assert any(t.kind != "monotone" for t in triples)  # the triples see oscillation
+    s = fit_study(values, h)
+    assert s.kind == "monotone" and s.fit == "power" and not s.scattered
+    assert s.order == pytest.approx(1.5, abs=0.15)
+    assert s.extrapolated == pytest.approx(10.0, abs=0.05)
+    assert e * 0.8 < s.sigma < e * 1.3
+    for u, v in zip(s.uncertainty, values):
+        assert abs(v - 10.0) <= u  # each level's band holds the exact limit
+
+
+def test_fit_outside_the_trusted_orders_uses_fixed_orders() -> None:
+    h = [size_law(m) for m in PAPER_AND_FINER]
+    # p = 3: the fixed-order fit whose sigma is smallest; h + h^2 fits h^3 best of the three.
+    s = fit_study([5.0 + 0.5 * x**3 for x in h], h)
+    assert s.order == pytest.approx(3.0, rel=1e-6)
+    assert (s.fit, s.safety_factor) == ("orders 1+2", 3.0)
+    # Exactly linear data: p = 1 is inside the trusted range.
+    assert fit_study([4.0 + x for x in h], h).fit == "power"
+
+
+def test_fit_of_scattered_data_is_their_mean_and_spread() -> None:
+    h = [size_law(m) for m in PAPER_AND_FINER]
+    values = [10.0, 10.3, 9.8, 10.2, 9.9, 10.25, 9.85, 10.1]  # no trend: noise only
+    s = fit_study(values, h)
+    assert (s.kind, s.fit, s.scattered) == ("scattered", "mean", True)
+    mean = sum(values) / 8
+    sd = math.sqrt(sum((v - mean) ** 2 for v in values) / 7)
+    assert s.extrapolated == pytest.approx(mean) and s.sigma == pytest.approx(sd)
+    assert s.uncertainty == pytest.approx([abs(v - mean) + 2 * sd for v in values])
+
+
+@pytest.mark.parametrize(
+    ("values", "kind"),
+    [
+        ((1.0, 2.0, 4.0, 8.0), "divergent"),  # differences grow with refinement
+        ((5.0, 5.0, 5.0, 5.0), "constant"),
+        ((5.0, math.nan, 5.0, 4.0), "undefined"),
+        ((5.0, 4.0, 3.5), "undefined"),  # three levels: Roache's triple, not a fit
+    ],
+)
+def test_fit_kinds(values, kind: str) -> None:
+    h = [size_law(m) for m in PAPER_AND_FINER[: len(values)]]
+    s = fit_study(values, h)
+    assert s.kind == kind and len(s.uncertainty) == len(values)
+    if kind == "constant":
+        assert s.extrapolated == 5.0 and s.uncertainty == (0.0,) * 4
+    else:
+        assert math.isnan(s.extrapolated)
+
+
+def test_fit_checks_its_sizes() -> None:
+    with pytest.raises(ValueError, match="4 values but 3"):
+        fit_study([1.0, 2.0, 3.0, 4.0], [3.0, 2.0, 1.0])
+    with pytest.raises(ValueError, match="decrease"):
+        fit_study([1.0, 2.0, 3.0, 4.0], [3.0, 2.0, 2.0, 1.0])

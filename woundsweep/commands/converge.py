@@ -3,7 +3,8 @@
 Solves one job on L meshes whose mesh size factor grows by r per level, or on the listed
 factors (`model.convergence`), and prints, per stage and quantity, the value at each level,
 the observed order p, Roache's grid convergence index of the finest grid, the
-Richardson-extrapolated value and the largest deviation of a level from it. Writes
+Richardson-extrapolated value and the largest deviation of a level from it, and with four or
+more levels the least-squares fit over all of them (`model.gci.fit_study`). Writes
 RUN_DIR/convergence/job_<N>.json and job_<N>.png.
 """
 
@@ -67,6 +68,38 @@ def study_lines(study: dict[str, Any]) -> list[str]:
         bad = {lv["stages"][stage]["status"] for lv in levels} - {"converged"}
         if bad:
             lines.append(f"{stage:>5} not converged on every level: {', '.join(sorted(bad))}")
+    if study.get("fits"):
+        lines += _fit_lines(study)
+    return lines
+
+
+def _fit_lines(study: dict[str, Any]) -> list[str]:
+    """The least-squares fits over all levels: order p, limit f0, sigma (* when the data
+    scatter more than their range), each level's uncertainty U as a % of f0, the largest
+    |deviation| from f0 in %, and the fit's form."""
+    levels = study["levels"]
+    lines = [
+        "least-squares fits over all levels (U: each level's uncertainty, % of f0)",
+        f"{'stage':>5} {'quantity':<11}{'p':>6}{'f0':>10}{'sigma':>9}"
+        + "".join(f"{'U m=' + format(lv['mesh_size_factor'], '.3g'):>10}" for lv in levels)
+        + f"{'dev %':>8}  form",
+    ]
+    for stage, per_q in study["fits"].items():
+        for q, fit in per_q.items():
+            f0 = fit["extrapolated"]
+            scale = 100 / abs(f0) if f0 not in (None, 0) and math.isfinite(f0) else None
+            us = "".join(
+                f"{_num(None if scale is None or u is None else u * scale, '.2f'):>10}"
+                for u in fit["uncertainty"]
+            )
+            devs = [abs(d) for d in study["fit_deviations"][stage][q] if d is not None]
+            dev = 100 * max(devs) if devs else None
+            mark = "*" if fit["scattered"] else " "
+            lines.append(
+                f"{stage:>5} {_SHORT[q]:<11}{_num(fit['order'], '.2f'):>6}{_num(f0):>10}"
+                f"{_num(fit['sigma'], '.3g'):>8}{mark}{us}{_num(dev, '.2f'):>8}"
+                f"  {fit['kind']}{' ' + fit['fit'] if fit['fit'] else ''}"
+            )
     return lines
 
 
@@ -99,7 +132,9 @@ def cmd(
     2) closure force and (stage 3) closure traction per level, with the observed order p,
     the grid convergence index of the finest mesh (GCI, Fs = 1.25), the
     Richardson-extrapolated value of the three finest levels and the largest deviation of a
-    level from it. Writes RUN_DIR/convergence/job_<N>.json and job_<N>.png.
+    level from it; with four or more levels also the least-squares fit of each quantity over
+    all of them (order, limit, scatter, each level's uncertainty). Writes
+    RUN_DIR/convergence/job_<N>.json and job_<N>.png.
     """
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
     os.environ.setdefault("OMP_NUM_THREADS", "1")

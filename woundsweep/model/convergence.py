@@ -6,7 +6,11 @@ job's geometry (closure zone included); every other mesh input is the job's. The
 scales every element size with s = (0.5 / m)^(2/3) (`woundsweep.mesh.sizing`): s is each
 level's relative element size, and the ratios of consecutive sizes are those the observed
 order and the GCI use (r^(2/3) for a constant factor ratio r). Each quantity's deviation at
-a level is (f - f_ext) / f_ext, f_ext the finest triple's extrapolation. The meshes are cached
+a level is (f - f_ext) / f_ext, f_ext the finest triple's extrapolation. With four or more
+levels each quantity is also fitted over all of them by least squares (`gci.fit_study`: order,
+limit f0, scatter and each level's uncertainty U), with deviations (f - f0) / f0: meshes that
+are not nested scatter about the error's law, which a triple cannot tell from oscillation.
+The meshes are cached
 under ``RUN_DIR/convergence/meshes/`` (ids: the hash of their `GeometrySpec`); the study is
 written to ``RUN_DIR/convergence/job_<N>.json`` and drawn in ``job_<N>.png``.
 """
@@ -24,9 +28,16 @@ from ..errors import WoundsweepError
 from ..fsutil import atomic_write, atomic_write_bytes
 from ..mesh.spec import FINEST_FACTOR
 from ..schema import StageStatus
-from .gci import SAFETY_FACTOR, grid_studies
+from .gci import SAFETY_FACTOR, fit_study, grid_studies
 
-__all__ = ["QUANTITIES", "convergence_study", "draw_study", "level_factors", "parse_factors"]
+__all__ = [
+    "QUANTITIES",
+    "analyse_levels",
+    "convergence_study",
+    "draw_study",
+    "level_factors",
+    "parse_factors",
+]
 
 # Per-stage quantities of the study: result fields, and from the diagnostics the stage-2
 # closure reaction of the left flank and the stage-3 traction sized from it.
@@ -128,12 +139,37 @@ def convergence_study(
             }
         )
         del model
+    study = {
+        "job_index": int(job_index),
+        "job_id": str(row["job_id"]),
+        "geometry": base.describe(),
+        "safety_factor": SAFETY_FACTOR,
+        "levels": level_rows,
+        **analyse_levels(level_rows),
+        "units": (
+            "mm, kPa, mN, s; gci_fine and deviations are fractions, a fit's sigma and "
+            "uncertainty are in the quantity's unit"
+        ),
+    }
+    path = out_dir / f"job_{int(job_index)}.json"
+    atomic_write_bytes(path, (json.dumps(_jsonable(study), indent=1) + "\n").encode())
+    study["json"] = str(path)
+    study["figure"] = str(draw_study(study, out_dir / f"job_{int(job_index)}.png"))
+    return study
+
+
+def analyse_levels(level_rows: list[dict[str, Any]]) -> dict[str, Any]:
+    """The studies of the levels' values (the module docstring): ``size_ratios``, per stage
+    and quantity the triples' ``studies`` and ``deviations``, and with four or more levels
+    the least-squares ``fits`` and ``fit_deviations``."""
     sizes = [lv["relative_size"] for lv in level_rows]
     ratios = [a / b for a, b in zip(sizes, sizes[1:])]
     studies: dict[str, dict[str, list[dict[str, Any]]]] = {}
     deviations: dict[str, dict[str, list[float | None]]] = {}
+    fits: dict[str, dict[str, dict[str, Any]]] = {}
+    fit_deviations: dict[str, dict[str, list[float | None]]] = {}
     for stage in level_rows[0]["stages"]:
-        per_q, dev_q = {}, {}
+        per_q, dev_q, fit_q, fit_dev_q = {}, {}, {}, {}
         for q in QUANTITIES:
             values = [lv["stages"][stage][q] for lv in level_rows]
             if all(v is None for v in values):
@@ -141,28 +177,28 @@ def convergence_study(
             vals = [math.nan if v is None else v for v in values]
             per_q[q] = [s._asdict() for s in grid_studies(vals, sizes)]
             f_ext = per_q[q][-1]["extrapolated"]
-            dev_q[q] = [
-                (v - f_ext) / f_ext if math.isfinite(v) and math.isfinite(f_ext) and f_ext else None
-                for v in vals
-            ]
+            dev_q[q] = _deviations(vals, f_ext)
+            if len(vals) >= 4:
+                fit = fit_study(vals, sizes)._asdict()
+                fit_q[q] = fit
+                fit_dev_q[q] = _deviations(vals, fit["extrapolated"])
         studies[stage] = per_q
         deviations[stage] = dev_q
-    study = {
-        "job_index": int(job_index),
-        "job_id": str(row["job_id"]),
-        "geometry": base.describe(),
+        if fit_q:
+            fits[stage], fit_deviations[stage] = fit_q, fit_dev_q
+    return {
         "size_ratios": ratios,
-        "safety_factor": SAFETY_FACTOR,
-        "levels": level_rows,
         "studies": studies,
         "deviations": deviations,
-        "units": "mm, kPa, mN, s; gci_fine and deviations are fractions",
+        "fits": fits,
+        "fit_deviations": fit_deviations,
     }
-    path = out_dir / f"job_{int(job_index)}.json"
-    atomic_write_bytes(path, (json.dumps(_jsonable(study), indent=1) + "\n").encode())
-    study["json"] = str(path)
-    study["figure"] = str(draw_study(study, out_dir / f"job_{int(job_index)}.png"))
-    return study
+
+
+def _deviations(values: list[float], limit: float) -> list[float | None]:
+    """(f - limit) / limit per level (None where either is not a number or limit is 0)."""
+    ok = math.isfinite(limit) and limit != 0
+    return [(v - limit) / limit if ok and math.isfinite(v) else None for v in values]
 
 
 def _jsonable(x: Any) -> Any:
@@ -177,8 +213,9 @@ def _jsonable(x: Any) -> Any:
 
 
 def draw_study(study: dict[str, Any], path: Path) -> Path:
-    """Each quantity against the relative element size, one line per stage; the finest
-    triple's Richardson extrapolation at size 0 (hollow marker)."""
+    """Each quantity against the relative element size, one line per stage; at size 0 the
+    finest triple's Richardson extrapolation (hollow circle) and the least-squares limit
+    (hollow square)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -199,13 +236,17 @@ def draw_study(study: dict[str, Any], path: Path) -> Path:
             fin = study["studies"].get(stage, {}).get(q)
             if fin and fin[-1]["kind"] == "monotone":
                 ax.plot([0.0], [fin[-1]["extrapolated"]], "o", mfc="none", color=color)
+            fit = study.get("fits", {}).get(stage, {}).get(q)
+            if fit and fit["kind"] == "monotone":
+                ax.plot([0.0], [fit["extrapolated"]], "s", mfc="none", color=color)
         ax.set_xlabel("relative element size s = (0.5 / m)^(2/3)")
         ax.set_ylabel(q)
         ax.set_xlim(left=0.0)
         ax.grid(alpha=0.3)
     axes[0].legend(fontsize=8)
     fig.suptitle(
-        f"job {study['job_index']}: {study['geometry']} (hollow: Richardson extrapolation)",
+        f"job {study['job_index']}: {study['geometry']} (hollow circle: Richardson "
+        "extrapolation; square: least-squares limit)",
         fontsize=9,
     )
     atomic_write(path, lambda tmp: fig.savefig(tmp, format="png", dpi=110))

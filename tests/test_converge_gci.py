@@ -191,6 +191,7 @@ def test_fit_of_scattered_data_is_their_mean_and_spread() -> None:
     [
         ((1.0, 2.0, 4.0, 8.0), "divergent"),  # differences grow with refinement
         ((5.0, 5.0, 5.0, 5.0), "constant"),
+        ((1.1e-16, 2.2e-16, 0.0, 1.1e-16), "constant"),  # roundoff about zero
         ((5.0, math.nan, 5.0, 4.0), "undefined"),
         ((5.0, 4.0, 3.5), "undefined"),  # three levels: Roache's triple, not a fit
     ],
@@ -200,7 +201,7 @@ def test_fit_kinds(values, kind: str) -> None:
     s = fit_study(values, h)
     assert s.kind == kind and len(s.uncertainty) == len(values)
     if kind == "constant":
-        assert s.extrapolated == 5.0 and s.uncertainty == (0.0,) * 4
+        assert s.extrapolated == values[0] and s.uncertainty == (0.0,) * 4
     else:
         assert math.isnan(s.extrapolated)
 

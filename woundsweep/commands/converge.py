@@ -80,7 +80,7 @@ def _fit_lines(study: dict[str, Any]) -> list[str]:
     levels = study["levels"]
     lines = [
         "least-squares fits over all levels (U: each level's uncertainty, % of f0)",
-        f"{'stage':>5} {'quantity':<11}{'p':>6}{'f0':>10}{'sigma':>9}"
+        f"{'stage':>5} {'quantity':<11}{'p':>6}{'f0':>10}{'sigma':>10}"
         + "".join(f"{'U m=' + format(lv['mesh_size_factor'], '.3g'):>10}" for lv in levels)
         + f"{'dev %':>8}  form",
     ]
@@ -97,7 +97,7 @@ def _fit_lines(study: dict[str, Any]) -> list[str]:
             mark = "*" if fit["scattered"] else " "
             lines.append(
                 f"{stage:>5} {_SHORT[q]:<11}{_num(fit['order'], '.2f'):>6}{_num(f0):>10}"
-                f"{_num(fit['sigma'], '.3g'):>8}{mark}{us}{_num(dev, '.2f'):>8}"
+                f"{_num(fit['sigma'], '.3g'):>9}{mark}{us}{_num(dev, '.2f'):>8}"
                 f"  {fit['kind']}{' ' + fit['fit'] if fit['fit'] else ''}"
             )
     return lines

@@ -181,7 +181,10 @@ def analyse_levels(level_rows: list[dict[str, Any]]) -> dict[str, Any]:
             if len(vals) >= 4:
                 fit = fit_study(vals, sizes)._asdict()
                 fit_q[q] = fit
-                fit_dev_q[q] = _deviations(vals, fit["extrapolated"])
+                constant = fit["kind"] == "constant"  # equal up to roundoff: no deviation
+                fit_dev_q[q] = (
+                    [0.0] * len(vals) if constant else _deviations(vals, fit["extrapolated"])
+                )
         studies[stage] = per_q
         deviations[stage] = dev_q
         if fit_q:

@@ -139,7 +139,10 @@ def grid_studies(values: Sequence[float], r: float | Sequence[float]) -> list[Gr
 # Least-squares fits (`fit_study`).
 FIT_SAFETY_FACTOR = 3.0  # Fs of a fixed-order fit (the observed order is not trusted)
 FIT_ORDER_RANGE = (0.5, 2.1)  # observed orders whose power-law fit is the estimate
-_ORDER_SCAN = (-4.0, 8.0, 481)  # p scanned on this grid (bounds, points), then refined
+_ORDER_SCAN = (-4.0, 8.0, 481)
+# Values that differ by less than this (relative to max(1, |f|)) are equal: e.g. a stage-2
+# closure gap of 1e-16 mm at every level.
+_ROUNDOFF = 1e-12  # p scanned on this grid (bounds, points), then refined
 
 
 class FitStudy(NamedTuple):
@@ -214,7 +217,7 @@ def fit_study(values: Sequence[float], sizes: Sequence[float]) -> FitStudy:
     n, nan = len(f), math.nan
     if n < 4 or not all(math.isfinite(v) for v in f):
         return FitStudy("undefined", "", nan, nan, nan, False, nan, (nan,) * n)
-    if max(f) == min(f):
+    if max(f) - min(f) <= _ROUNDOFF * max(1.0, max(abs(v) for v in f)):
         return FitStudy("constant", "", nan, f[0], 0.0, False, SAFETY_FACTOR, (0.0,) * n)
     t = [x / h[-1] for x in h]
     p, f0, amp, res = _power_fit(t, f)

@@ -167,10 +167,16 @@ def test_fit_of_noisy_data_reports_its_scatter() -> None:
 
 def test_fit_outside_the_trusted_orders_uses_fixed_orders() -> None:
     h = [size_law(m) for m in PAPER_AND_FINER]
-    # p = 3: the fixed-order fit whose sigma is smallest; h + h^2 fits h^3 best of the three.
-    s = fit_study([5.0 + 0.5 * x**3 for x in h], h)
-    assert s.order == pytest.approx(3.0, rel=1e-6)
-    assert (s.fit, s.safety_factor) == ("orders 1+2", 3.0)
+    # p = 3 and a law rising to its limit with p = 4 (2358 stage 1 has this shape): the
+    # order-2 fit, whose sigma is the smaller; its limit lies beyond the data (the lower
+    # order overshoots the true one), and with Fs = 3 every level's band holds the true limit.
+    for f0, a, p in ((5.0, 0.5, 3.0), (9.6, -0.3, 4.0)):
+        values = [f0 + a * x**p for x in h]
+        s = fit_study(values, h)
+        assert s.order == pytest.approx(p, rel=1e-6)
+        assert (s.fit, s.safety_factor) == ("order 2", 3.0)
+        assert (s.extrapolated < min(values)) if a > 0 else (s.extrapolated > max(values))
+        assert all(abs(v - f0) <= u for u, v in zip(s.uncertainty, values))
     # Exactly linear data: p = 1 is inside the trusted range.
     assert fit_study([4.0 + x for x in h], h).fit == "power"
 

@@ -25,8 +25,9 @@ the element sizes h_i:
   linear least squares at each p): monotone convergence for p > 0, divergence for p <= 0,
   unless the data scatter (below);
 - when 0.5 <= p < 2.1 that fit is the estimate, with Fs = 1.25; otherwise the fixed-order
-  fits f0 + a h, f0 + a h^2 and f0 + a h + b h^2 are made and the one with the smallest
-  standard deviation is the estimate, with Fs = 3;
+  fits f0 + a h and f0 + a h^2 are made and the one with the smaller standard deviation is
+  the estimate, with Fs = 3 (Eca and Hoekstra also try f0 + a h + b h^2, which can turn
+  back inside the data and put f0 on the wrong side of them);
 - the fit's standard deviation sigma = sqrt(SS / (n - k)) (k its number of parameters) and
   the data range D = (max f - min f) / (n - 1);
 - when the power law's sigma >= D no trend stands above the scatter, whatever p: kind
@@ -149,7 +150,7 @@ class FitStudy(NamedTuple):
     """The least-squares convergence of one quantity on four or more grids (module docstring)."""
 
     kind: str  # monotone | scattered | divergent | constant | undefined
-    fit: str  # power | order 1 | order 2 | orders 1+2 | mean (the estimate's form; "" if none)
+    fit: str  # power | order 1 | order 2 | mean (the estimate's form; "" if none)
     order: float  # p of the power-law fit
     extrapolated: float  # f0 of the estimate
     sigma: float  # standard deviation of the estimate's residuals
@@ -235,7 +236,7 @@ def fit_study(values: Sequence[float], sizes: Sequence[float]) -> FitStudy:
         sigma = math.sqrt(res / (n - 3))
         fits.append((sigma, "power", SAFETY_FACTOR, lambda x: f0 + amp * x**p))
     else:
-        for name, orders in (("order 1", (1,)), ("order 2", (2,)), ("orders 1+2", (1, 2))):
+        for name, orders in (("order 1", (1,)), ("order 2", (2,))):
             c, r = _linear_fit([ones] + [[x**q for x in t] for q in orders], f)
             sigma = math.sqrt(r / (n - 1 - len(orders)))
 

@@ -109,6 +109,28 @@ def test_converge_on_listed_factors_uses_their_unequal_ratios(run_dir: Path, cap
 
 
 @pytest.mark.fem
+def test_converge_on_uniform_refinements_is_nested(run_dir: Path, capsys) -> None:
+    from woundsweep.cli import main
+
+    args = ["converge", str(run_dir), "--job", "0", "--refine", "2", "--factors", "0.1"]
+    assert main([*args, "--stages", "1-1"]) == 0
+    assert "m=0.1/4" in capsys.readouterr().out
+    study = json.loads((run_dir / "convergence" / "job_0_refined.json").read_text())
+    levels = study["levels"]
+    assert [lv["refinements"] for lv in levels] == [0, 1, 2]
+    assert [lv["mesh_size_factor"] for lv in levels] == [0.1] * 3
+    assert [lv["cells"] for lv in levels] == [levels[0]["cells"] * 8**k for k in range(3)]
+    assert study["size_ratios"] == pytest.approx([2.0, 2.0])
+    f3, f2, f1 = (lv["stages"]["1"]["p99_von_mises_kPa"] for lv in levels)
+    ref = grid_study(f1, f2, f3, 2.0)
+    (s,) = study["studies"]["1"]["p99_von_mises_kPa"]
+    assert s["kind"] == ref.kind
+    assert (run_dir / "convergence" / "job_0_refined.png").read_bytes()[:4] == b"\x89PNG"
+    for bad in (["--refine", "1"], ["--refine", "2", "--factors", "0.1,0.2,0.3"]):
+        assert main(["converge", str(run_dir), "--job", "0", *bad]) == 2
+
+
+@pytest.mark.fem
 def test_solve_flags_interpenetration_and_stores_profiles(run_dir: Path) -> None:
     import h5py
 

@@ -1,7 +1,8 @@
-"""``woundsweep converge RUN_DIR --job N [--levels L] [--ratio r | --factors LIST] [--stages A-B]``.
+"""``woundsweep converge RUN_DIR --job N [--levels L] [--ratio r | --factors LIST] [--refine K]
+[--stages A-B]``.
 
-Solves one job on L meshes whose mesh size factor grows by r per level, or on the listed
-factors (`model.convergence`), and prints, per stage and quantity, the value at each level,
+Solves one job on L meshes whose mesh size factor grows by r per level, on the listed
+factors, or on one mesh and its K uniform refinements (`model.convergence`), and prints, per stage and quantity, the value at each level,
 the observed order p, Roache's grid convergence index of the finest grid, the
 Richardson-extrapolated value and the largest deviation of a level from it, and with four or
 more levels the least-squares fit over all of them (`model.gci.fit_study`). Writes
@@ -33,6 +34,12 @@ _SHORT = {
 }
 
 
+def _label(level: dict[str, Any], prefix: str = "") -> str:
+    """A level's column head: m=<factor>, and /2^k for its k-th uniform refinement."""
+    k = level.get("refinements", 0)
+    return prefix + f"m={level['mesh_size_factor']:.3g}" + (f"/{2**k}" if k else "")
+
+
 def _num(v: Any, spec: str = ".4g") -> str:
     return "-" if v is None or not math.isfinite(v) else format(v, spec)
 
@@ -42,9 +49,7 @@ def study_lines(study: dict[str, Any]) -> list[str]:
     GCI in %, the extrapolated value of the finest triple and the largest |deviation| of a
     level from it in %)."""
     levels = study["levels"]
-    head = f"{'stage':>5} {'quantity':<11}" + "".join(
-        f"{'m=' + format(lv['mesh_size_factor'], '.3g'):>11}" for lv in levels
-    )
+    head = f"{'stage':>5} {'quantity':<11}" + "".join(f"{_label(lv):>11}" for lv in levels)
     lines = [
         f"job {study['job_index']}: {study['geometry']}",
         "cells: " + ", ".join(str(lv["cells"]) for lv in levels)
@@ -81,7 +86,7 @@ def _fit_lines(study: dict[str, Any]) -> list[str]:
     lines = [
         "least-squares fits over all levels (U: each level's uncertainty, % of f0)",
         f"{'stage':>5} {'quantity':<11}{'p':>6}{'f0':>10}{'sigma':>10}"
-        + "".join(f"{'U m=' + format(lv['mesh_size_factor'], '.3g'):>10}" for lv in levels)
+        + "".join(f"{_label(lv, 'U '):>10}" for lv in levels)
         + f"{'dev %':>8}  form",
     ]
     for stage, per_q in study["fits"].items():
@@ -116,6 +121,12 @@ def _fit_lines(study: dict[str, Any]) -> list[str]:
     help="The levels' mesh size factors instead, increasing, up to 2, e.g. 0.3,0.5,0.7,1,1.4 "
     "(the paper's factors and two finer levels).",
 )  # fmt: skip
+@click.option(
+    "--refine", "refinements", type=int, default=None, metavar="K",
+    help="The levels are instead one mesh (the job's factor, or the one --factors value) and "
+    "its uniform refinements 1..K (K >= 2): nested meshes, element sizes halved and cells "
+    "times 8 per level. Writes job_<N>_refined.json and .png.",
+)  # fmt: skip
 @click.option("--stages", "stages_text", default="1-6", show_default=True, help="Stages A-B.")
 def cmd(
     run_dir: Path,
@@ -123,6 +134,7 @@ def cmd(
     levels: int,
     ratio: float,
     factors_text: str | None,
+    refinements: int | None,
     stages_text: str,
 ) -> None:
     """Solve one job on systematically refined meshes and estimate the discretisation error.
@@ -139,12 +151,22 @@ def cmd(
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     stages = parse_stage_range(stages_text, SolverError)
-    from ..model.convergence import convergence_study, parse_factors
+    from ..model.convergence import check_refinements, convergence_study, parse_factors
 
-    factors = None if factors_text is None else parse_factors(factors_text)
+    minimum = 1 if refinements is not None else 3
+    factors = None if factors_text is None else parse_factors(factors_text, minimum)
+    if refinements is not None:
+        check_refinements(refinements, factors)
     logging.getLogger().setLevel(logging.WARNING)  # FFCx/cffi log every compile at INFO
     study = convergence_study(
-        run_dir, job_index, levels, ratio, stages, echo=click.echo, factors=factors
+        run_dir,
+        job_index,
+        levels,
+        ratio,
+        stages,
+        echo=click.echo,
+        factors=factors,
+        refinements=refinements,
     )
     for line in study_lines(study):
         click.echo(line)

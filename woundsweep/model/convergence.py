@@ -1,7 +1,9 @@
 """Mesh convergence of one job: the stages on systematically refined meshes, with `gci`.
 
 The levels are mesh size factors: m r^k (k < levels, m the job's) or an explicit increasing
-list (e.g. the paper's 0.3, 0.5, 0.7 and finer ones, up to `FINEST_FACTOR`). Each meshes the
+list (e.g. the paper's 0.3, 0.5, 0.7 and finer ones, up to `FINEST_FACTOR`); or one mesh
+and its uniform refinements (`woundsweep.mesh.refine`: nested, element sizes halved per
+level, eight times the cells). Each meshes the
 job's geometry (closure zone included); every other mesh input is the job's. The size law
 scales every element size with s = (0.5 / m)^(2/3) (`woundsweep.mesh.sizing`): s is each
 level's relative element size, and the ratios of consecutive sizes are those the observed
@@ -35,6 +37,7 @@ __all__ = [
     "analyse_levels",
     "convergence_study",
     "draw_study",
+    "check_refinements",
     "level_factors",
     "parse_factors",
 ]
@@ -67,14 +70,23 @@ def level_factors(mesh_size_factor: float, levels: int, ratio: float) -> list[fl
     return [min(f, FINEST_FACTOR) for f in factors]
 
 
-def parse_factors(text: str) -> list[float]:
-    """``--factors`` "0.3,0.5,0.7,1,1.4": at least 3 increasing factors in (0, FINEST_FACTOR]
-    (WoundsweepError, exit 2, otherwise)."""
+def check_refinements(refinements: int, factors: list[float] | None) -> None:
+    """``--refine K``: K >= 2 (three levels), with at most one listed factor (the base mesh);
+    WoundsweepError, exit 2, otherwise."""
+    if refinements < 2:
+        raise WoundsweepError(f"--refine {refinements}: at least 2 refinements (3 levels)")
+    if factors is not None and len(factors) != 1:
+        raise WoundsweepError("--refine takes one --factors value (the base mesh's), or none")
+
+
+def parse_factors(text: str, minimum: int = 3) -> list[float]:
+    """``--factors`` "0.3,0.5,0.7,1,1.4": at least ``minimum`` increasing factors in
+    (0, FINEST_FACTOR] (WoundsweepError, exit 2, otherwise)."""
     try:
         factors = [float(t) for t in text.split(",")]
     except ValueError:
         raise WoundsweepError(f"--factors {text!r}: expected numbers separated by commas") from None
-    if len(factors) < 3:
+    if len(factors) < minimum:
         raise WoundsweepError(f"--factors {text!r}: at least 3 levels are needed for an order")
     if not all(0 < f <= FINEST_FACTOR for f in factors):
         raise WoundsweepError(f"--factors {text!r}: each must be in (0, {FINEST_FACTOR:g}]")
@@ -102,12 +114,16 @@ def convergence_study(
     echo: Callable[[str], None] | None = None,
     jit: dict[str, Any] | None = None,
     factors: list[float] | None = None,
+    refinements: int | None = None,
 ) -> dict[str, Any]:
     """Solve job ``job_index`` at each level, write and return the study (JSON-ready dict).
 
-    The levels are ``factors`` if given, else ``levels`` factors from the job's by ``ratio``.
+    The levels are ``factors`` if given, else ``levels`` factors from the job's by ``ratio``;
+    with ``refinements`` K they are instead the mesh at the job's factor (or the single one
+    of ``factors``) and its uniform refinements 1..K (`woundsweep.mesh.refine`).
     """
     from ..mesh.cache import get_mesh
+    from ..mesh.refine import refine_uniform
     from ..mesh.sizing import _size_scale
     from ..sweep.grid import canonical_hash, load_run
     from .job import job_model, job_row, job_spec, run_stages
@@ -116,20 +132,30 @@ def convergence_study(
     run = load_run(run_dir)
     row = job_row(run, job_index)
     base = job_spec(run, row)
-    if factors is None:
-        factors = level_factors(base.mesh_size_factor, levels, ratio)
+    if refinements is not None:
+        m0 = factors[0] if factors else base.mesh_size_factor
+        plan = [(m0, k) for k in range(refinements + 1)]
+    else:
+        factors = factors or level_factors(base.mesh_size_factor, levels, ratio)
+        plan = [(m, 0) for m in factors]
     out_dir = run.run_dir / "convergence"
     level_rows = []
-    for k, m in enumerate(factors):
+    mesh = None
+    for k, (m, times) in enumerate(plan):
         spec = dataclasses.replace(base, mesh_size_factor=m)
-        mesh = get_mesh(out_dir, canonical_hash(spec.to_dict()), spec).mesh
-        say(f"level {k}: mesh size factor {m:.4g}, {mesh.info['cells']} cells")
+        if times == 0:
+            mesh = get_mesh(out_dir, canonical_hash(spec.to_dict()), spec).mesh
+        else:
+            mesh = refine_uniform(mesh)
+        how = f", refined {times} times" if times else ""
+        say(f"level {k}: mesh size factor {m:.4g}{how}, {mesh.info['cells']} cells")
         model, materials = job_model(run, row, mesh, jit)
         records = run_stages(model, materials, stages[1])
         level_rows.append(
             {
                 "mesh_size_factor": m,
-                "relative_size": _size_scale(m, spec.element_degree),
+                "refinements": times,
+                "relative_size": _size_scale(m, spec.element_degree) / 2**times,
                 "cells": int(mesh.info["cells"]),
                 "stages": {
                     str(rec.result.stage): _stage_values(rec)
@@ -151,10 +177,11 @@ def convergence_study(
             "uncertainty are in the quantity's unit"
         ),
     }
-    path = out_dir / f"job_{int(job_index)}.json"
+    name = f"job_{int(job_index)}" + ("_refined" if refinements is not None else "")
+    path = out_dir / f"{name}.json"
     atomic_write_bytes(path, (json.dumps(_jsonable(study), indent=1) + "\n").encode())
     study["json"] = str(path)
-    study["figure"] = str(draw_study(study, out_dir / f"job_{int(job_index)}.png"))
+    study["figure"] = str(draw_study(study, out_dir / f"{name}.png"))
     return study
 
 

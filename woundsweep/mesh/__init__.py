@@ -1,7 +1,7 @@
 """The mesh of one wound geometry: parameters, size law, gmsh build and the per-run cache.
 
 `spec` (GeometrySpec, validation) and `sizing` (the size law) are pure Python; `build` and
-`cache` import gmsh. Names are re-exported lazily, so importing this package costs nothing.
+`cache` import gmsh; `refine` (uniform refinement of a built mesh) is numpy. Names are re-exported lazily, so importing this package costs nothing.
 Mesh tags live in `woundsweep.schema`.
 """
 
@@ -24,6 +24,7 @@ __all__ = [
     "mesh_checksum",
     "mesh_path",
     "mesh_size_mm",
+    "refine_uniform",
     "save_mesh",
     "wound_distance_mm",
 ]
@@ -45,6 +46,7 @@ _HOME = {
     "mesh_checksum": "cache",
     "mesh_path": "cache",
     "save_mesh": "cache",
+    "refine_uniform": "refine",
 }
 
 __getattr__, __dir__ = lazy_exports(__name__, _HOME)

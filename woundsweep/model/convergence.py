@@ -147,7 +147,7 @@ def convergence_study(
             mesh = get_mesh(out_dir, canonical_hash(spec.to_dict()), spec).mesh
         else:
             mesh = refine_uniform(mesh)
-        how = f", refined {times} times" if times else ""
+        how = f", refinement {times}" if times else ""
         say(f"level {k}: mesh size factor {m:.4g}{how}, {mesh.info['cells']} cells")
         model, materials = job_model(run, row, mesh, jit)
         records = run_stages(model, materials, stages[1])

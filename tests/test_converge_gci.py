@@ -7,7 +7,7 @@ import math
 import pytest
 
 from woundsweep.errors import WoundsweepError
-from woundsweep.model.convergence import level_factors, parse_factors
+from woundsweep.model.convergence import QUANTITIES, level_factors, parse_factors
 from woundsweep.model.gci import SAFETY_FACTOR, fit_study, grid_studies, grid_study
 
 
@@ -217,3 +217,26 @@ def test_fit_checks_its_sizes() -> None:
         fit_study([1.0, 2.0, 3.0, 4.0], [3.0, 2.0, 1.0])
     with pytest.raises(ValueError, match="decrease"):
         fit_study([1.0, 2.0, 3.0, 4.0], [3.0, 2.0, 2.0, 1.0])
+
+
+def test_analysed_levels_fit_the_converged_ones() -> None:
+    from woundsweep.model.convergence import analyse_levels
+
+    h = [size_law(m) for m in PAPER_AND_FINER]
+    law = [12.0 + 2.0 * x**1.5 for x in h]
+    rows = [
+        {
+            "relative_size": x,
+            "stages": {"4": {q: None for q in QUANTITIES} | {"p99_von_mises_kPa": v}},
+        }
+        for x, v in zip(h, law[:-1] + [None])  # the finest level did not converge
+    ]
+    got = analyse_levels(rows)
+    fit = got["fits"]["4"]["p99_von_mises_kPa"]
+    want = fit_study(law[:-1], h[:-1])
+    assert fit["kind"] == want.kind == "monotone"
+    assert fit["extrapolated"] == pytest.approx(12.0, rel=1e-6)
+    assert fit["uncertainty"][:-1] == pytest.approx(list(want.uncertainty))
+    assert math.isnan(fit["uncertainty"][-1])
+    devs = got["fit_deviations"]["4"]["p99_von_mises_kPa"]
+    assert devs[-1] is None and devs[0] == pytest.approx((law[0] - 12.0) / 12.0, rel=1e-5)

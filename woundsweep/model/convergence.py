@@ -205,8 +205,13 @@ def analyse_levels(level_rows: list[dict[str, Any]]) -> dict[str, Any]:
             per_q[q] = [s._asdict() for s in grid_studies(vals, sizes)]
             f_ext = per_q[q][-1]["extrapolated"]
             dev_q[q] = _deviations(vals, f_ext)
+            # The fit uses the levels where the stage converged (a failed finest level
+            # leaves the others' trend).
+            ok = [i for i, v in enumerate(vals) if math.isfinite(v)]
             if len(vals) >= 4:
-                fit = fit_study(vals, sizes)._asdict()
+                fit = fit_study([vals[i] for i in ok], [sizes[i] for i in ok])._asdict()
+                u = dict(zip(ok, fit["uncertainty"]))
+                fit["uncertainty"] = [u.get(i, math.nan) for i in range(len(vals))]
                 fit_q[q] = fit
                 constant = fit["kind"] == "constant"  # equal up to roundoff: no deviation
                 fit_dev_q[q] = (

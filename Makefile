@@ -39,7 +39,8 @@ demo: setup
 bench: setup
 	@for b in benchmarks/bench_*.py; do echo "== $$b"; $(PY) $$b || exit 1; done
 
-# p99's mesh convergence on six paper geometries (not part of bench: about an hour).
+# p99's mesh convergence on six paper geometries at eight mesh size factors (not part of
+# bench: about an hour and a half).
 bench-convergence: setup
 	$(WS) generate sweeps/paper.yaml --out runs/paper
 	$(PY) benchmarks/convergence.py runs/paper

@@ -272,7 +272,7 @@ def draw_study(study: dict[str, Any], path: Path) -> Path:
             if fin and fin[-1]["kind"] == "monotone":
                 ax.plot([0.0], [fin[-1]["extrapolated"]], "o", mfc="none", color=color)
             fit = study.get("fits", {}).get(stage, {}).get(q)
-            if fit and fit["kind"] == "monotone":
+            if fit and fit["kind"] in ("monotone", "scattered"):
                 ax.plot([0.0], [fit["extrapolated"]], "s", mfc="none", color=color)
         ax.set_xlabel("relative element size s = (0.5 / m)^(2/3)")
         ax.set_ylabel(q)

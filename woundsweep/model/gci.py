@@ -140,10 +140,10 @@ def grid_studies(values: Sequence[float], r: float | Sequence[float]) -> list[Gr
 # Least-squares fits (`fit_study`).
 FIT_SAFETY_FACTOR = 3.0  # Fs of a fixed-order fit (the observed order is not trusted)
 FIT_ORDER_RANGE = (0.5, 2.1)  # observed orders whose power-law fit is the estimate
-_ORDER_SCAN = (-4.0, 8.0, 481)
+_ORDER_SCAN = (-4.0, 8.0, 481)  # p scanned on this grid (bounds, points), then refined
 # Values that differ by less than this (relative to max(1, |f|)) are equal: e.g. a stage-2
 # closure gap of 1e-16 mm at every level.
-_ROUNDOFF = 1e-12  # p scanned on this grid (bounds, points), then refined
+_ROUNDOFF = 1e-12
 
 
 class FitStudy(NamedTuple):
@@ -236,14 +236,14 @@ def fit_study(values: Sequence[float], sizes: Sequence[float]) -> FitStudy:
         sigma = math.sqrt(res / (n - 3))
         fits.append((sigma, "power", SAFETY_FACTOR, lambda x: f0 + amp * x**p))
     else:
-        for name, orders in (("order 1", (1,)), ("order 2", (2,))):
-            c, r = _linear_fit([ones] + [[x**q for x in t] for q in orders], f)
-            sigma = math.sqrt(r / (n - 1 - len(orders)))
+        for q in (1, 2):
+            c, r = _linear_fit([ones, [x**q for x in t]], f)
+            sigma = math.sqrt(r / (n - 2))
 
-            def model(x: float, c: list[float] = c, orders: tuple[int, ...] = orders) -> float:
-                return c[0] + sum(cj * x**q for cj, q in zip(c[1:], orders))
+            def model(x: float, c: list[float] = c, q: int = q) -> float:
+                return c[0] + c[1] * x**q
 
-            fits.append((sigma, name, FIT_SAFETY_FACTOR, model))
+            fits.append((sigma, f"order {q}", FIT_SAFETY_FACTOR, model))
     sigma, name, fs, model = min(fits, key=lambda item: item[0])
     limit = model(0.0)
     scattered = sigma >= data_range

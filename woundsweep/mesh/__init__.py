@@ -1,8 +1,9 @@
 """The mesh of one wound geometry: parameters, size law, gmsh build and the per-run cache.
 
 `spec` (GeometrySpec, validation) and `sizing` (the size law) are pure Python; `build` and
-`cache` import gmsh; `refine` (uniform refinement of a built mesh) is numpy. Names are re-exported lazily, so importing this package costs nothing.
-Mesh tags live in `woundsweep.schema`.
+`cache` import gmsh; `refine` (uniform refinement of a built mesh) is numpy. Names are
+re-exported lazily, so importing this package costs nothing. Mesh tags live in
+`woundsweep.schema`.
 """
 
 from __future__ import annotations

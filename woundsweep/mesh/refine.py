@@ -5,12 +5,13 @@ The new nodes are the edges' midpoints, so the refined mesh is nested in the coa
 sequence of refinements is systematic in the strict sense the grid convergence index
 assumes. Each tetrahedron keeps its four corner tetrahedra; the octahedron left inside is
 cut along its shortest diagonal, which keeps the shapes from degrading over repeated
-refinements. Tags pass to the children. The boundary stays the coarse
-mesh's: a curved wound keeps its facets, so the refined levels converge to the faceted
-geometry's solution.
+refinements. Tags pass to the children. The boundary stays the coarse mesh's: a curved
+wound keeps its facets, so the refined levels converge to the faceted geometry's solution.
 """
 
 from __future__ import annotations
+
+from collections.abc import Callable
 
 import numpy as np
 
@@ -22,15 +23,20 @@ __all__ = ["refine_uniform"]
 _EDGES = np.array([(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)])
 
 
-def _midpoints(points: np.ndarray, cells: np.ndarray) -> tuple[np.ndarray, np.ndarray, dict]:
+def _midpoints(points: np.ndarray, cells: np.ndarray) -> tuple[np.ndarray, np.ndarray, Callable]:
     """The points with the edges' midpoints appended, each cell's six midpoint node numbers
-    (in `_EDGES` order) and the map sorted edge -> midpoint node."""
+    (in `_EDGES` order) and a function (nodes p, q) -> the midpoint node of each edge p-q."""
     edges = np.sort(cells[:, _EDGES], axis=2).reshape(-1, 2)
     unique, inverse = np.unique(edges, axis=0, return_inverse=True)
     first = len(points)
     new_points = np.vstack([points, 0.5 * (points[unique[:, 0]] + points[unique[:, 1]])])
-    lookup = {(int(a), int(b)): first + i for i, (a, b) in enumerate(unique)}
-    return new_points, first + inverse.reshape(-1, 6), lookup
+    # np.unique sorts the edges lexicographically, so their (low, high) keys are sorted too.
+    keys = unique[:, 0] * first + unique[:, 1]
+
+    def midpoint(p: np.ndarray, q: np.ndarray) -> np.ndarray:
+        return first + np.searchsorted(keys, np.minimum(p, q) * first + np.maximum(p, q))
+
+    return new_points, first + inverse.reshape(-1, 6), midpoint
 
 
 def _children(points: np.ndarray, cells: np.ndarray, mid: np.ndarray) -> np.ndarray:
@@ -64,17 +70,12 @@ def _children(points: np.ndarray, cells: np.ndarray, mid: np.ndarray) -> np.ndar
 def refine_uniform(mesh: MeshData) -> MeshData:
     """The mesh with every cell split into eight and every facet into four (tags kept;
     children positively oriented; ``info`` copied with the new cell count)."""
-    points, mid, lookup = _midpoints(mesh.points, mesh.cells)
+    points, mid, midpoint = _midpoints(mesh.points, mesh.cells)
     cells = _children(points, mesh.cells, mid).reshape(-1, 4)
     flip = _signed_volumes(points, cells) < 0
     cells[flip] = cells[flip][:, [1, 0, 2, 3]]
     a, b, c = mesh.facets.T
-
-    def edge_mid(p: np.ndarray, q: np.ndarray) -> np.ndarray:
-        lo, hi = np.minimum(p, q), np.maximum(p, q)
-        return np.array([lookup[(int(x), int(y))] for x, y in zip(lo, hi)], dtype=np.int64)
-
-    ab, bc, ca = edge_mid(a, b), edge_mid(b, c), edge_mid(c, a)
+    ab, bc, ca = midpoint(a, b), midpoint(b, c), midpoint(c, a)
     # The corner triangles keep the parent's orientation, as does the middle one.
     facets = np.stack(
         [np.c_[a, ab, ca], np.c_[ab, b, bc], np.c_[ca, bc, c], np.c_[ab, bc, ca]], axis=1

@@ -1,20 +1,20 @@
 """Mesh convergence of one job: the stages on systematically refined meshes, with `gci`.
 
 The levels are mesh size factors: m r^k (k < levels, m the job's) or an explicit increasing
-list (e.g. the paper's 0.3, 0.5, 0.7 and finer ones, up to `FINEST_FACTOR`); or one mesh
-and its uniform refinements (`woundsweep.mesh.refine`: nested, element sizes halved per
-level, eight times the cells). Each meshes the
-job's geometry (closure zone included); every other mesh input is the job's. The size law
-scales every element size with s = (0.5 / m)^(2/3) (`woundsweep.mesh.sizing`): s is each
-level's relative element size, and the ratios of consecutive sizes are those the observed
-order and the GCI use (r^(2/3) for a constant factor ratio r). Each quantity's deviation at
+list (e.g. the paper's 0.3, 0.5, 0.7 and finer ones, up to `FINEST_FACTOR`), each meshing
+the job's geometry (closure zone included); or one such mesh and its uniform refinements
+(`woundsweep.mesh.refine`: nested, element sizes halved per level, eight times the cells).
+Every other mesh input is the job's. The size law scales every element size with
+s = (0.5 / m)^(2/3) (`woundsweep.mesh.sizing`): s is each level's relative element size
+(halved per refinement), and the ratios of consecutive sizes are those the observed order
+and the GCI use (r^(2/3) for a constant factor ratio r). Each quantity's deviation at
 a level is (f - f_ext) / f_ext, f_ext the finest triple's extrapolation. With four or more
 levels each quantity is also fitted over all of them by least squares (`gci.fit_study`: order,
 limit f0, scatter and each level's uncertainty U), with deviations (f - f0) / f0: meshes that
 are not nested scatter about the error's law, which a triple cannot tell from oscillation.
-The meshes are cached
-under ``RUN_DIR/convergence/meshes/`` (ids: the hash of their `GeometrySpec`); the study is
-written to ``RUN_DIR/convergence/job_<N>.json`` and drawn in ``job_<N>.png``.
+The gmsh meshes are cached under ``RUN_DIR/convergence/meshes/`` (ids: the hash of their
+`GeometrySpec`); the study is written to ``RUN_DIR/convergence/job_<N>.json`` and drawn in
+``job_<N>.png`` (``job_<N>_refined.*`` for refinements).
 """
 
 from __future__ import annotations

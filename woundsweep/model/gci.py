@@ -194,12 +194,17 @@ def _power_fit(t: list[float], f: list[float]) -> tuple[float, float, float, flo
     i = min(range(n), key=values.__getitem__)
     a, b = grid[max(i - 1, 0)], grid[min(i + 1, n - 1)]
     g = (math.sqrt(5.0) - 1.0) / 2.0
+    c, d = b - g * (b - a), a + g * (b - a)
+    sc, sd = ss(c), ss(d)
     for _ in range(100):  # golden section inside the bracket of the best grid point
-        c, d = b - g * (b - a), a + g * (b - a)
-        if ss(c) < ss(d):
-            b = d
+        if sc < sd:
+            b, d, sd = d, c, sc
+            c = b - g * (b - a)
+            sc = ss(c)
         else:
-            a = c
+            a, c, sc = c, d, sd
+            d = a + g * (b - a)
+            sd = ss(d)
     p = 0.5 * (a + b)
     (f0, amp), res = _linear_fit([ones, [x**p for x in t]], f)
     return p, f0, amp, res

@@ -6,7 +6,7 @@ Usage::
 
 Compiles the wound model's forms for the solver benchmark's mid-size paper wedge twice, each
 into its own empty cache: once with the flags DOLFINx uses by default, once with
-`woundsweep.compat.KERNEL_CFLAGS` (what the solver uses). At the stage-1 state of the same
+`woundsweep.physics.compat.KERNEL_CFLAGS` (what the solver uses). At the stage-1 state of the same
 job it times the residual and Jacobian assemblies (median of 15 and 7) and prints the ratios
 and the largest relative difference of the assembled residual and matrix entries between the
 two builds. Compare figures within one run.
@@ -32,16 +32,16 @@ sys.path.insert(0, str(ROOT))
 
 from timing import median_ms  # noqa: E402
 
+from woundsweep.config.geometry import GeometrySpec  # noqa: E402
 from woundsweep.mesh.build import build_mesh  # noqa: E402
-from woundsweep.mesh.spec import GeometrySpec  # noqa: E402
 
 __all__ = ["main"]
 
 
 def _measure(mesh, flags: list[str] | None, cache: str) -> dict[str, object]:  # type: ignore[no-untyped-def]
-    from woundsweep import compat
-    from woundsweep.model.materials import JobMaterials
-    from woundsweep.model.stages import WoundModel
+    from woundsweep.physics import compat
+    from woundsweep.physics.materials import JobMaterials
+    from woundsweep.physics.stages import WoundModel
 
     jit = compat.jit_options(cache_dir=cache)
     if flags is None:
@@ -72,7 +72,7 @@ def _measure(mesh, flags: list[str] | None, cache: str) -> dict[str, object]:  #
 def main() -> int:
     import dolfinx.jit
 
-    from woundsweep import compat
+    from woundsweep.physics import compat
 
     logging.getLogger().setLevel(logging.WARNING)  # no compiler command lines
     T = 2.0  # bench_solver.py's "mid-size" job

@@ -33,15 +33,15 @@ sys.path.insert(0, str(ROOT))
 
 from timing import median_ms  # noqa: E402
 
+from woundsweep.config.geometry import GeometrySpec  # noqa: E402
 from woundsweep.mesh.build import build_mesh  # noqa: E402
-from woundsweep.mesh.spec import GeometrySpec  # noqa: E402
 
 __all__ = ["main"]
 
 
 def main() -> int:
-    from woundsweep.model.materials import JobMaterials
-    from woundsweep.model.stages import WoundModel
+    from woundsweep.physics.materials import JobMaterials
+    from woundsweep.physics.stages import WoundModel
 
     # Same geometry as bench_solver.py's "mid-size" job.
     T = 2.0

@@ -26,9 +26,9 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
+from woundsweep.config.geometry import GeometrySpec  # noqa: E402
 from woundsweep.mesh.build import build_mesh  # noqa: E402
 from woundsweep.mesh.sizing import PAPER_CELL_CAP  # noqa: E402
-from woundsweep.mesh.spec import GeometrySpec  # noqa: E402
 
 __all__ = ["main"]
 
@@ -71,7 +71,8 @@ def run_fixed(repeats: int) -> None:
 
 
 def run_all() -> int:
-    from woundsweep.sweep.grid import expand, load_sweep
+    from woundsweep.config.manifest import expand
+    from woundsweep.config.sweep import load_sweep
 
     manifest = expand(load_sweep(ROOT / "sweeps" / "paper.yaml"))
     geoms = manifest.drop_duplicates("geometry_id").reset_index(drop=True)

@@ -52,18 +52,19 @@ def _run(rd: Path, *args: str, env: dict[str, str] | None = None) -> float:
 def _startup_cost(rd: Path, runs: int = 5) -> dict[str, float]:
     """Median wall time of `solve --job <missing>` minus that of an empty job (fault exit:0),
     forked by a fork server and as a fresh ``python -m woundsweep`` process."""
-    from woundsweep.sweep.forkserver import ForkServer
+    from woundsweep.execution.forkserver import ForkServer, JobRequest
 
     env = dict(os.environ, PYTHONUNBUFFERED="1", PYTHONFAULTHANDLER="1")
     empty = dict(env, WOUNDSWEEP_FAULT="exit:0")
-    missing = ["solve", str(rd), "--job", "1000000", "--stages", "1-1"]
+    request = JobRequest(str(rd), 1000000, (1, 1), str(rd / "bench-startup.h5"))
+    missing = request.command()[3:]
     log = rd / "bench-startup.log"
     server = ForkServer(env)
-    server.spawn(["--version"], env, log, None)  # start it (untimed)
+    server.spawn(request, env, log, None)  # start it (untimed)
 
     def forked(job_env: dict[str, str]) -> float:
         t0 = time.perf_counter()
-        pid = server.spawn(missing, job_env, log, None).pid
+        pid = server.spawn(request, job_env, log, None).pid
         while not server.wait4(pid)[0]:
             time.sleep(0.001)
         return time.perf_counter() - t0
@@ -163,9 +164,9 @@ def main() -> int:
                     f"  overhead (empty job + imports) / median job: {over:.2f} / {solve:.1f} s = "
                     f"{100 * over / solve:.1f}% (target < 10%)"
                 )
-                from woundsweep.solverfile import read_solver_file
-                from woundsweep.sweep.grid import load_run
-                from woundsweep.sweep.store import JobOutcome, Store
+                from woundsweep.config.manifest import load_run
+                from woundsweep.store.solverfile import read_solver_file
+                from woundsweep.store.writer import JobOutcome, Store
 
                 # Store write alone, for one real result re-solved to a scratch file.
                 run = load_run(rd)

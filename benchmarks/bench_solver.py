@@ -36,8 +36,8 @@ from pathlib import Path  # noqa: E402
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
+from woundsweep.config.geometry import GeometrySpec  # noqa: E402
 from woundsweep.mesh.build import build_mesh  # noqa: E402
-from woundsweep.mesh.spec import GeometrySpec  # noqa: E402
 
 __all__ = ["main"]
 
@@ -89,9 +89,9 @@ def main(argv: list[str] | None = None) -> int:
 
     import ffcx.codegeneration.jit as ffcx_jit
 
-    from woundsweep import compat
-    from woundsweep.model.materials import JobMaterials
-    from woundsweep.model.stages import WoundModel
+    from woundsweep.physics import compat
+    from woundsweep.physics.materials import JobMaterials
+    from woundsweep.physics.stages import WoundModel
 
     compiled: list[str] = []
     real = ffcx_jit._compile_objects

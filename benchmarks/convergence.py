@@ -12,7 +12,7 @@ is solved with ``woundsweep converge RUN_DIR --job N --factors ...`` (its JSON a
 land under RUN_DIR/convergence/). The default levels are the paper's factors and five more,
 up to 2 (element sizes 1.40 to 0.40 of the reference): the meshes are not nested, so the
 values scatter about the error's law, and the least-squares fit over all eight levels
-(`woundsweep.model.gci.fit_study`) separates the trend from the scatter. The summary prints,
+(`woundsweep.studies.gci.fit_study`) separates the trend from the scatter. The summary prints,
 per job and stage, p99 at each level, then the fit: its limit f0, the largest deviation of
 the paper's factors (0.3, 0.5, 0.7) from it, their spread (max - min) / mean, the order p,
 the standard deviation sigma (* when it is not below the data range: no trend above the
@@ -36,7 +36,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from woundsweep.cli import main as woundsweep  # noqa: E402
-from woundsweep.model.convergence import analyse_levels  # noqa: E402
+from woundsweep.studies.convergence import analyse_levels  # noqa: E402
 
 __all__ = ["main"]
 

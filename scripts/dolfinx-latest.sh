@@ -190,7 +190,7 @@ fi
 
 # ---- what runs inside the root (mode "test"): fem tests, then one demo job through all stages
 # "A-B" covering every stage of the model.
-STAGES_PY='from woundsweep.schema import STAGES as s; print(f"{min(s)}-{max(s)}")'
+STAGES_PY='from woundsweep.core.schema import STAGES as s; print(f"{min(s)}-{max(s)}")'
 in_root=$(cat <<'IN_ROOT'
 set -uo pipefail
 cd /src

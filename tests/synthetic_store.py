@@ -1,6 +1,6 @@
 """Synthetic result stores in the real run-directory layout, for the analysis tests.
 
-`write_store` expands a sweep with `woundsweep.sweep.grid` (so the manifest is the real one),
+`write_store` expands a sweep with `woundsweep.config.sweep` (so the manifest is the real one),
 writes ``RUN_DIR/sweep.yaml`` and ``RUN_DIR/manifest.parquet``, makes one row per job and
 stage (manifest columns + ``stage``, ``status`` and the `StageResult` fields of
 docs/design.md) and writes them with `write_results` through the store's own writer
@@ -18,10 +18,11 @@ import numpy as np
 import pandas as pd
 import yaml
 
-from woundsweep.schema import ExitCode, FailureClass, StageResult, StageStatus
-from woundsweep.solverfile import SolverOutput
-from woundsweep.sweep.grid import expand, parse_sweep
-from woundsweep.sweep.store import JobOutcome, Store
+from woundsweep.config.manifest import expand
+from woundsweep.config.sweep import parse_sweep
+from woundsweep.core.schema import ExitCode, FailureClass, StageResult, StageStatus
+from woundsweep.store.solverfile import SolverOutput
+from woundsweep.store.writer import JobOutcome, Store
 
 __all__ = [
     "SMALL_SWEEP",

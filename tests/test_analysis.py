@@ -15,7 +15,6 @@ from synthetic_store import SMALL_SWEEP, depth_stress, random_stress, write_stor
 from woundsweep.analysis import (
     FEATURES,
     REQUIRED_COLUMNS,
-    ModelSettings,
     assign_quantiles,
     encode_features,
     evaluate,
@@ -26,15 +25,16 @@ from woundsweep.analysis import (
     normalised_locations,
     quantile_edges,
     random_split,
-    resolve_settings,
     select_rows,
     skin_codes,
     stiff_vs_soft,
 )
 from woundsweep.analysis.data import require_columns
-from woundsweep.errors import AnalysisError, StoreError
-from woundsweep.sweep.grid import expand, parse_sweep
-from woundsweep.sweep.results import result_schema
+from woundsweep.config.analysis import ModelSettings, resolve_settings
+from woundsweep.config.manifest import expand
+from woundsweep.config.sweep import parse_sweep
+from woundsweep.core.errors import AnalysisError, StoreError
+from woundsweep.store.reader import result_schema
 
 # Few, fast rounds: the assertions are about what the data allow, not about tuning.
 FAST = {"n_estimators": 40, "learning_rate": 0.3, "early_stopping_rounds": 5, "nthread": 2}

@@ -27,7 +27,7 @@ from woundsweep.analysis.profile_locations import (
 )
 from woundsweep.analysis.profile_locations import report_lines as profile_report
 from woundsweep.analysis.settings import STAGE_GROUPS
-from woundsweep.model.profiles import PROFILE_LINES, profile_lines
+from woundsweep.physics.profiles import PROFILE_LINES, profile_lines
 
 # 2 widths x 3 shape variants = 6 geometries per mesh size factor, x 2 skins.
 TINY = {

@@ -27,11 +27,11 @@ import numpy as np
 import pytest
 import yaml
 
-from woundsweep.solverfile import read_solver_file
-from woundsweep.sweep.grid import load_run
-from woundsweep.sweep.identity import result_fingerprint
-from woundsweep.sweep.results import read_results
-from woundsweep.sweep.store import Store
+from woundsweep.config.manifest import load_run
+from woundsweep.store.identity import result_fingerprint
+from woundsweep.store.reader import read_results
+from woundsweep.store.solverfile import read_solver_file
+from woundsweep.store.writer import Store
 
 ROOT = Path(__file__).resolve().parent
 DEMO = yaml.safe_load((ROOT.parent / "sweeps" / "demo.yaml").read_text())
@@ -235,7 +235,7 @@ def sweep_cases() -> list[Case]:
         "materials.skin_types.newskin": [{"c_kPa": 1}, 5, [1]],
         "materials.skin_types": [[1, 2], "x"],
         "materials": [[1], "x"],
-        "stages.contact_model": ["depth", ["surface"], 1, "x"],
+        "stages.contact_model": ["smooth", "depth", 1],
         "stages.closure_load": ["x", 1, {"a": 1}],
         "stages.closure_zone.y_fraction": [2, 0, float("nan")],
         "stages.contact_penalty_GPa": [[-1, 5, 100], [1, 5], "x"],

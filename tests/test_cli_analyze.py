@@ -15,8 +15,8 @@ import pytest
 from synthetic_store import SMALL_SWEEP, depth_stress, write_results, write_store
 
 from woundsweep.cli import main
-from woundsweep.sweep.grid import DEFAULTS
-from woundsweep.sweep.results import read_results
+from woundsweep.config.sweep import DEFAULTS
+from woundsweep.store.reader import read_results
 
 # 108 geometries x 3 skins x 2 orientations x 6 stages = 3,888 rows.
 CLI_SWEEP = {

@@ -13,8 +13,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from woundsweep.core.schema import CELL_TAGS, FACET_TAGS
 from woundsweep.mesh.cache import load_mesh
-from woundsweep.schema import CELL_TAGS, FACET_TAGS
 
 ROOT = Path(__file__).resolve().parent.parent
 DEMO = ROOT / "sweeps" / "demo.yaml"

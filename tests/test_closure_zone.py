@@ -7,10 +7,10 @@ import math
 import numpy as np
 import pytest
 
-from woundsweep.errors import GeometryError
+from woundsweep.config.geometry import GeometrySpec
+from woundsweep.core.errors import GeometryError
+from woundsweep.core.schema import WOUND, WOUND_ZONE
 from woundsweep.mesh.build import MeshData, build_mesh
-from woundsweep.mesh.spec import GeometrySpec
-from woundsweep.schema import WOUND, WOUND_ZONE
 
 
 def exact_zone_area(spec: GeometrySpec) -> float:
@@ -148,7 +148,7 @@ def test_zone_fraction_outside_zero_one_is_a_geometry_error(bad: float) -> None:
 
 
 def test_from_row_takes_the_sweeps_zone() -> None:
-    from woundsweep.model.parameters import ClosureZone
+    from woundsweep.config.paper import ClosureZone
 
     row = {
         "wound_shape": "wedge", "dermal_thickness_mm": 1.0, "subcutis_thickness_mm": 1.0,

@@ -38,7 +38,8 @@ from woundsweep.contact import (
     FlankContact,
     orient_outward,
 )
-from woundsweep.model.materials import Fung, first_piola
+from woundsweep.physics.assembly import add_csr, add_vector
+from woundsweep.physics.materials import Fung, first_piola
 
 pytestmark = pytest.mark.fem
 
@@ -70,7 +71,7 @@ class Blocks:
         import dolfinx.fem
         import ufl
 
-        from woundsweep import compat
+        from woundsweep.physics import compat
 
         m = n if n_right is None else n_right  # R's grid across the contact plane
         pL, cL = box_tets((n, n, n), (-1.0, 0.0, 0.0), (0.0, 1.0, 1.0))
@@ -138,16 +139,20 @@ class Blocks:
         return self.u.x.array
 
     def residual(self, b: Any) -> None:
-        from woundsweep import compat
+        from woundsweep.physics import compat
 
         compat.assemble_vector(b, self.R_form)
-        self.contact.add_residual(b, self.u.x.array)
+        if self.contact.k_V_kPa > 0:
+            add_vector(b, self.contact.force_vector(self.u.x.array))
 
     def jacobian(self, A: Any) -> None:
-        from woundsweep import compat
+        from woundsweep.physics import compat
 
         compat.assemble_matrix(A, self.a_form)
-        self.contact.add_jacobian(A, self.u.x.array)
+        if self.contact.k_V_kPa > 0:
+            K = self.contact.tangent_csr(self.u.x.array)
+            if K.nnz:
+                add_csr(A, K)
 
     def _grad(self, w: np.ndarray) -> np.ndarray:
         W = w.reshape(-1, 3)[self.cell_nodes]

@@ -19,7 +19,7 @@ import scipy.sparse
 from test_contact import penetrating_state, two_squares
 
 from woundsweep.contact import GPA_TO_KPA, FlankContact
-from woundsweep.contact.protocol import structure
+from woundsweep.physics.assembly import structure
 
 
 def _contains(P: Any, K: Any) -> bool:
@@ -126,10 +126,10 @@ class _Step:
 @pytest.fixture(scope="module")
 def stage4() -> dict[str, Any]:
     """Stages 1-4 of the demo cylinder at 45 degrees, every stage-4 Jacobian recorded."""
+    from woundsweep.config.geometry import GeometrySpec
     from woundsweep.mesh.build import build_mesh
-    from woundsweep.mesh.spec import GeometrySpec
-    from woundsweep.model.materials import JobMaterials
-    from woundsweep.model.stages import WoundModel
+    from woundsweep.physics.materials import JobMaterials
+    from woundsweep.physics.stages import WoundModel
 
     m = WoundModel(build_mesh(GeometrySpec.cylindrical(1.0, 1.0, 4.0, 1.2, 0.0, 0.3)))
     m.set_materials(JobMaterials.table2("stiff", 45.0))
@@ -163,7 +163,7 @@ def test_a_contact_stage_stays_in_its_preallocated_pattern(stage4) -> None:
 
 @pytest.mark.fem
 def test_the_preallocated_jacobian_is_that_of_plain_insertion(stage4) -> None:
-    from woundsweep import compat
+    from woundsweep.physics import compat
 
     m = stage4["model"]
     m.problem.jacobian(m.problem.A)
@@ -176,7 +176,7 @@ def test_the_preallocated_jacobian_is_that_of_plain_insertion(stage4) -> None:
 
 @pytest.mark.fem
 def test_the_pattern_grows_when_a_state_leaves_it(stage4) -> None:
-    from woundsweep import compat
+    from woundsweep.physics import compat
 
     m = stage4["model"]
     c, A = m.contact, m.problem.A
@@ -209,7 +209,7 @@ def test_the_pattern_grows_when_a_state_leaves_it(stage4) -> None:
 def test_an_entry_outside_the_pattern_still_reaches_the_factorised_matrix(stage4) -> None:
     """A tangent entry the preallocation did not foresee is inserted, never dropped: through
     the block matrix too, whose grown structure the factorised matrix then takes."""
-    from woundsweep import compat
+    from woundsweep.physics import compat
 
     m = stage4["model"]
     c, A = m.contact, m.problem.A
@@ -221,7 +221,7 @@ def test_an_entry_outside_the_pattern_still_reaches_the_factorised_matrix(stage4
     assert A.getInfo()["mallocs"] == 0  # A took the grown structure at once
     B = compat.create_matrix(m.forms.a_form)
     compat.assemble_matrix(B, m.forms.a_form, finalize=False)
-    from woundsweep.contact.protocol import add_csr
+    from woundsweep.physics.assembly import add_csr
 
     add_csr(B, K, finalize=False)
     if m.tie.active:

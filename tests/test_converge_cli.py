@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import yaml
 
-from woundsweep.model.gci import fit_study, grid_study
+from woundsweep.studies.gci import fit_study, grid_study
 
 SWEEP = {
     "name": "converge-test",
@@ -135,7 +135,7 @@ def test_solve_flags_interpenetration_and_stores_profiles(run_dir: Path) -> None
     import h5py
 
     from woundsweep.cli import main
-    from woundsweep.model.profiles import PROFILE_POINTS
+    from woundsweep.physics.profiles import PROFILE_POINTS
 
     out = run_dir / "job0.h5"
     assert main(["solve", str(run_dir), "--job", "0", "--stages", "1-3", "--out", str(out)]) == 0

@@ -1,4 +1,4 @@
-"""Grid convergence math (`woundsweep.model.gci`) on analytic sequences; no DOLFINx."""
+"""Grid convergence math (`woundsweep.studies.gci`) on analytic sequences; no DOLFINx."""
 
 from __future__ import annotations
 
@@ -6,9 +6,9 @@ import math
 
 import pytest
 
-from woundsweep.errors import WoundsweepError
-from woundsweep.model.convergence import QUANTITIES, level_factors, parse_factors
-from woundsweep.model.gci import SAFETY_FACTOR, fit_study, grid_studies, grid_study
+from woundsweep.core.errors import WoundsweepError
+from woundsweep.studies.convergence import QUANTITIES, level_factors, parse_factors
+from woundsweep.studies.gci import SAFETY_FACTOR, fit_study, grid_studies, grid_study
 
 
 def sequence(f0: float, C: float, p: float, h1: float, r: float, n: int) -> list[float]:
@@ -220,7 +220,7 @@ def test_fit_checks_its_sizes() -> None:
 
 
 def test_analysed_levels_fit_the_converged_ones() -> None:
-    from woundsweep.model.convergence import analyse_levels
+    from woundsweep.studies.convergence import analyse_levels
 
     h = [size_law(m) for m in PAPER_AND_FINER]
     law = [12.0 + 2.0 * x**1.5 for x in h]

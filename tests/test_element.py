@@ -1,4 +1,4 @@
-"""The displacement element (`woundsweep.model.element`): P2 node bookkeeping, kinematics,
+"""The displacement element (`woundsweep.physics.element`): P2 node bookkeeping, kinematics,
 the exact homogeneous state, and a wounded P2 job through all six stages."""
 
 from __future__ import annotations
@@ -12,15 +12,16 @@ pytestmark = pytest.mark.fem
 
 @pytest.fixture(scope="module")
 def p2_box():
-    from woundsweep.model.stages import WoundModel
+    from woundsweep.config.solver import SolverSettings
+    from woundsweep.physics.stages import WoundModel
 
-    return WoundModel(box_patch(n_xy=4), element_degree=2)
+    return WoundModel(box_patch(n_xy=4), SolverSettings(element_degree=2))
 
 
 @pytest.fixture(scope="module")
 def wedge_mesh():
+    from woundsweep.config.geometry import GeometrySpec
     from woundsweep.mesh.build import build_mesh
-    from woundsweep.mesh.spec import GeometrySpec
 
     # t_d = 1, subcutis factor 1, L = 2, w = 0.6, apex depth 0.6 mm, m = 0.3
     return build_mesh(GeometrySpec.wedge(1.0, 1.0, 2.0, 0.6, 0.6, 0.3))
@@ -41,7 +42,7 @@ def test_p2_gradient_at_the_quadrature_points_is_exact_for_a_quadratic_field(p2_
     d = p2_box.domain
     x, y, z = d.X.T
     u = np.c_[x * x - 0.5 * y * z, x * y + 0.3 * z, z * z - 2.0 * x * z].ravel()
-    from woundsweep.model.element import POINTS
+    from woundsweep.physics.element import POINTS
 
     G = d.grad(u).reshape(len(d.cell_nodes), len(POINTS), 3, 3)
     V = np.einsum("kv,mvc->mkc", POINTS, d.X[d.cell_vertices])  # the rule's points
@@ -63,7 +64,7 @@ def test_p2_gradient_at_the_quadrature_points_is_exact_for_a_quadratic_field(p2_
 @pytest.mark.parametrize("skin", SKIN_TYPES)
 def test_p2_stages_1_and_2_reproduce_the_homogeneous_state(p2_box, skin: str) -> None:
     """Both pre-tension conditions give the per-layer homogeneous state at every P2 node."""
-    from woundsweep.model.materials import JobMaterials
+    from woundsweep.physics.materials import JobMaterials
 
     m = p2_box
     m.set_materials(JobMaterials.table2(skin, 0.0))
@@ -80,9 +81,9 @@ def test_p2_stages_1_and_2_reproduce_the_homogeneous_state(p2_box, skin: str) ->
 def test_p2_stress_samples_match_the_materials_at_their_points(p2_box) -> None:
     """Von Mises of a quadratic field at the stress rule's points, against the numpy material
     laws at the same physical points; the summary's maximum sits at the largest sample."""
-    from woundsweep.model.job import stress_summary
-    from woundsweep.model.materials import JobMaterials, first_piola, von_mises
-    from woundsweep.schema import DERMIS
+    from woundsweep.core.schema import DERMIS
+    from woundsweep.physics.job import stress_summary
+    from woundsweep.physics.materials import JobMaterials, first_piola, von_mises
 
     m, d = p2_box, p2_box.domain
     mats = JobMaterials.table2("normal", 30.0)
@@ -118,7 +119,7 @@ def test_p2_stress_samples_match_the_materials_at_their_points(p2_box) -> None:
 
 def test_p2_zone_triangles_cover_the_zone_with_the_parents_orientation(wedge_mesh) -> None:
     from woundsweep.contact.geometry import split_wound_flanks
-    from woundsweep.model.domain import WoundDomain
+    from woundsweep.physics.domain import WoundDomain
 
     p1, p2 = WoundDomain(wedge_mesh), WoundDomain(wedge_mesh, degree=2)
     zero1, zero2 = np.zeros(p1.n_dofs), np.zeros(p2.n_dofs)
@@ -144,11 +145,12 @@ def test_p2_zone_triangles_cover_the_zone_with_the_parents_orientation(wedge_mes
 
 
 def test_p2_wedge_through_all_six_stages(wedge_mesh) -> None:
-    from woundsweep.model.job import run_stages
-    from woundsweep.model.materials import JobMaterials
-    from woundsweep.model.stages import WoundModel
+    from woundsweep.config.solver import SolverSettings
+    from woundsweep.physics.job import run_stages
+    from woundsweep.physics.materials import JobMaterials
+    from woundsweep.physics.stages import WoundModel
 
-    m = WoundModel(wedge_mesh, element_degree=2)
+    m = WoundModel(wedge_mesh, SolverSettings(element_degree=2))
     records = run_stages(m, JobMaterials.table2("normal", 0.0), 6)
     assert [r.result.status for r in records] == ["converged"] * 6
     r2 = records[1]

@@ -1,4 +1,4 @@
-"""The fork server (woundsweep.sweep.forkserver): every job attempt a fresh forked child of one
+"""The fork server (woundsweep.execution.forkserver): every job attempt a fresh forked child of one
 process that has the solver stack imported, with the isolation of a process of its own.
 
 The server is real (DOLFINx, PETSc and MPI imported and initialised before it forks); the
@@ -22,9 +22,9 @@ import pandas as pd
 import pytest
 from test_runner import WS, _make_run, _solve_processes
 
-from woundsweep.sweep.forkserver import ForkServer
-from woundsweep.sweep.jitlock import _may_compile
-from woundsweep.sweep.process import JOB_NAME, SERVER_NAME, kill_group
+from woundsweep.execution.forkserver import ForkServer, JobRequest
+from woundsweep.execution.jitlock import _may_compile
+from woundsweep.execution.process import JOB_NAME, SERVER_NAME, kill_group
 
 pytestmark = pytest.mark.fem  # the server imports DOLFINx
 
@@ -48,11 +48,11 @@ def _wait(fs: ForkServer, pid: int, timeout: float = 120) -> tuple[int, object]:
     raise AssertionError(f"child {pid} still running after {timeout} s")
 
 
-def _spawn(fs: ForkServer, log: Path, fault: str = "", args: list[str] | None = None) -> int:
+def _spawn(fs: ForkServer, log: Path, fault: str = "", job: JobRequest | None = None) -> int:
     env = dict(ENV, WOUNDSWEEP_FAULT=fault) if fault else dict(ENV)
-    args = args or ["solve", str(log.parent), "--job", "0", "--stages", "1-1"]
+    job = job or JobRequest(str(log.parent), 0, (1, 1), str(log.with_suffix(".h5")))
     log.touch()  # as the runner's header line does
-    return fs.spawn(args, env, log, None).pid
+    return fs.spawn(job, env, log, None).pid
 
 
 def _stat(pid: int) -> list[str]:
@@ -177,7 +177,8 @@ def test_forked_solve_equals_a_fresh_interpreter(server: ForkServer, tmp_path: P
         [*WS, *args, str(tmp_path / "fresh.h5")], capture_output=True, text=True, env=ENV
     )
     assert fresh.returncode == 0, fresh.stderr
-    pid = _spawn(server, tmp_path / "forked.log", "", [*args, str(tmp_path / "forked.h5")])
+    forked = JobRequest(str(rd), job, (1, 1), str(tmp_path / "forked.h5"))
+    pid = _spawn(server, tmp_path / "forked.log", "", forked)
     status, _ = _wait(server, pid)
     assert os.WIFEXITED(status) and os.WEXITSTATUS(status) == 0
     assert "wrote" in (tmp_path / "forked.log").read_text()

@@ -12,11 +12,11 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from woundsweep.errors import GeometryError
+from woundsweep.config.geometry import GeometrySpec
+from woundsweep.core.errors import GeometryError
+from woundsweep.core.schema import CELL_TAGS, FACET_TAGS, TAGS, WOUND_TAGS
 from woundsweep.mesh.build import MeshData, build_mesh
 from woundsweep.mesh.sizing import PAPER_CELL_CAP, mesh_size_mm
-from woundsweep.mesh.spec import GeometrySpec
-from woundsweep.schema import CELL_TAGS, FACET_TAGS, TAGS, WOUND_TAGS
 
 # Coarse but varied: both shapes, wounds inside the dermis, touching the interface
 # (cylinder tangent to it, wedge apex on it) and cutting into the subcutis.
@@ -235,7 +235,7 @@ def test_identical_meshes_across_processes(meshes: dict[str, MeshData]) -> None:
     code = (
         "import hashlib, sys\n"
         "from woundsweep.mesh.build import build_mesh\n"
-        "from woundsweep.mesh.spec import GeometrySpec\n"
+        "from woundsweep.config.geometry import GeometrySpec\n"
         "m = build_mesh(GeometrySpec.cylindrical(1.0, 1.0, 2.0, 1.0, 0.2, 0.5))\n"
         "h = hashlib.sha256()\n"
         "for a in m[:5]: h.update(a.tobytes())\n"
@@ -305,7 +305,8 @@ def _paper_row(manifest, **where):
 def test_cell_cap_holds_for_extreme_paper_geometries() -> None:
     from pathlib import Path
 
-    from woundsweep.sweep.grid import expand, load_sweep
+    from woundsweep.config.manifest import expand
+    from woundsweep.config.sweep import load_sweep
 
     man = expand(load_sweep(Path(__file__).resolve().parent.parent / "sweeps" / "paper.yaml"))
     finest = man[man["mesh_size_factor"] == man["mesh_size_factor"].max()]

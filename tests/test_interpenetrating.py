@@ -9,8 +9,8 @@ import pytest
 
 from woundsweep.analysis.data import select_rows
 from woundsweep.analysis.settings import STRESS
-from woundsweep.model.job import _interpenetrating
-from woundsweep.schema import StageResult, stage_field_kinds
+from woundsweep.core.schema import StageResult, stage_field_kinds
+from woundsweep.physics.job import _interpenetrating
 
 
 def test_flag_is_stage_three_and_negative_gap_only() -> None:

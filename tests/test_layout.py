@@ -55,7 +55,7 @@ def _graph() -> dict[str, set[str]]:
 
 def test_import_graph_has_no_cycle() -> None:
     graph = _graph()
-    assert "woundsweep.model.stages" in graph and graph["woundsweep.model.stages"]
+    assert "woundsweep.physics.stages" in graph and graph["woundsweep.physics.stages"]
     state: dict[str, int] = {}  # 1 on the stack, 2 done
 
     def visit(node: str, path: list[str]) -> None:
@@ -71,6 +71,59 @@ def test_import_graph_has_no_cycle() -> None:
     for name in sorted(graph):
         if name not in state:
             visit(name, [name])
+
+
+# The layers, bottom first (docs/design.md, "Layers"): a module imports from its own package
+# or from a lower layer, never sideways or up. Top-level modules sit in the layer named here.
+LAYERS: tuple[tuple[str, ...], ...] = (
+    ("core", "__init__"),
+    ("config",),
+    ("mesh", "contact", "solver", "store"),
+    ("physics",),
+    ("execution", "studies", "analysis", "viz"),
+    ("cli", "clitypes", "commands", "__main__"),
+)
+RANK = {unit: rank for rank, units in enumerate(LAYERS) for unit in units}
+
+
+def _unit(module: str) -> str:
+    parts = module.split(".")
+    return parts[1] if len(parts) > 1 else "__init__"
+
+
+def _all_imports(path: Path) -> set[str]:
+    """Every woundsweep module ``path`` imports, at module level or inside a function."""
+    name = _module_name(path)
+    package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+    found: set[str] = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            found.update(a.name for a in node.names if a.name.startswith("woundsweep"))
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package.rsplit(".", node.level - 1)[0] if node.level > 1 else package
+                target = f"{base}.{node.module}" if node.module else base
+            else:
+                target = node.module or ""
+            if target == "woundsweep":  # `from .. import compat`: the names are the modules
+                found.update(f"{target}.{a.name}" for a in node.names)
+            elif target.startswith("woundsweep"):
+                found.add(target)
+    return found
+
+
+def test_imports_run_down_the_layers() -> None:
+    modules = {_module_name(p): p for p in PACKAGE.rglob("*.py")}
+    assert {_unit(m) for m in modules} - {"__version__"} <= set(RANK)
+    upward = []
+    for name, path in sorted(modules.items()):
+        for target in sorted(_all_imports(path)):
+            src, dst = _unit(name), _unit(target)
+            if dst == "__version__" or src == dst:
+                continue
+            if RANK[dst] >= RANK[src] and not (RANK[src] == RANK["cli"] == RANK[dst]):
+                upward.append(f"{name} -> {target}")
+    assert upward == []
 
 
 def test_modules_are_small() -> None:

@@ -1,7 +1,7 @@
 """Materials: stresses against an independent numpy transcription of the paper's energies.
 
 The reference energies below are written from eqs. 10-11 of the paper, not from
-woundsweep.model.materials, and differentiated by central finite differences.
+woundsweep.physics.materials, and differentiated by central finite differences.
 """
 
 from __future__ import annotations
@@ -11,20 +11,20 @@ import math
 import numpy as np
 import pytest
 
-from woundsweep.model.materials import (
+from woundsweep.config.paper import FungParameters, Materials
+from woundsweep.physics.materials import (
     Fung,
     MooneyRivlin,
     first_piola,
     homogeneous_state,
     von_mises,
 )
-from woundsweep.model.parameters import SKIN_TYPES as TABLE2_SKIN_TYPES
 
 # Table 2 entries in the short names of the reference energies below.
 FLYNN_SKIN_TYPES = {
     name: {"c": e["c_kPa"], "mu": tuple(e["mu_kPa"]), "lambda11": e["lambda11_kPa"],
            "lambda_other": e["lambda_other_kPa"], "K": e["K_kPa"], "tsf": e["tsf"]}
-    for name, e in TABLE2_SKIN_TYPES.items()
+    for name, e in Materials.table2().to_dict()["skin_types"].items()
 }  # fmt: skip
 
 SKIN_TYPES = ("normal", "stiff", "soft")
@@ -91,10 +91,9 @@ def test_table2_values() -> None:
     assert (mr.C10, mr.C20, mr.K) == (0.4, 1.4, 50.0)
 
 
-def test_from_table_matches_named_constructor() -> None:
-    entry = {"c_kPa": 42.6, "mu_kPa": [35.6, 11.8, 11.8], "lambda11_kPa": 11.8,
-             "lambda_other_kPa": 2.0, "K_kPa": 250.0, "tsf": 1.05}  # fmt: skip
-    a, b = Fung.from_table(entry, 30.0), Fung.table2("stiff", 30.0)
+def test_from_parameters_matches_named_constructor() -> None:
+    entry = FungParameters(42.6, (35.6, 11.8, 11.8), 11.8, 2.0, 250.0, 1.05)
+    a, b = Fung.from_parameters(entry, 30.0), Fung.table2("stiff", 30.0)
     assert a.c == b.c and a.mu == b.mu and a.K == b.K
     np.testing.assert_allclose(a.a1, [math.cos(math.pi / 6), 0.5, 0.0])
 
@@ -162,7 +161,7 @@ def _ufl_stress(material_name: str, params: list[tuple[object, np.ndarray]]) -> 
     import dolfinx.fem
     import ufl
 
-    from woundsweep import compat
+    from woundsweep.physics import compat
 
     pts = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], dtype=float)
     cells = np.array([[0, 1, 2, 3]])

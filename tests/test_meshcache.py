@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 
 import woundsweep.mesh.cache as meshcache
-from woundsweep.errors import GeometryError, StoreError
+from woundsweep.config.geometry import GeometrySpec
+from woundsweep.core.errors import GeometryError, StoreError
 from woundsweep.mesh.build import MeshData, build_mesh
 from woundsweep.mesh.cache import get_mesh, load_mesh, mesh_path, save_mesh
-from woundsweep.mesh.spec import GeometrySpec
 
 GID = "0123456789abcdef"
 SPEC = GeometrySpec.cylindrical(1.0, 1.0, 1.5, 1.0, 0.2, 0.3)

@@ -8,9 +8,9 @@ from typing import Any
 import numpy as np
 import pytest
 
-from woundsweep.schema import StageStatus
+from woundsweep.config.solver import NewtonSettings
+from woundsweep.core.schema import StageStatus
 from woundsweep.solver.continuation import LoadState, continuation
-from woundsweep.solver.settings import NewtonSettings
 
 CONVERGED, MAX_ITERATIONS = StageStatus.CONVERGED, StageStatus.MAX_ITERATIONS
 
@@ -115,6 +115,8 @@ def test_a_path_that_needs_ever_smaller_increments_ends() -> None:
 class _Small:
     """A few-dof problem of the `woundsweep.solver.NonlinearProblem` protocol; subclasses give
     R (``_grad``) and its Jacobian."""
+
+    multipliers = None
 
     def __init__(self, u0: list[float]) -> None:
         self.u = np.array(u0, dtype=float)

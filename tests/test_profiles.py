@@ -1,4 +1,4 @@
-"""Von Mises line profiles (`woundsweep.model.profiles`) on a gmsh mesh, without DOLFINx."""
+"""Von Mises line profiles (`woundsweep.physics.profiles`) on a gmsh mesh, without DOLFINx."""
 
 from __future__ import annotations
 
@@ -7,9 +7,9 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from woundsweep.config.geometry import GeometrySpec
 from woundsweep.mesh.build import build_mesh
-from woundsweep.mesh.spec import GeometrySpec
-from woundsweep.model.profiles import (
+from woundsweep.physics.profiles import (
     PROFILE_POINTS,
     line_maxima,
     locate_cells,

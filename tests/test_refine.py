@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 
 from tests.box_mesh import boundary_facets, box_tets
+from woundsweep.config.geometry import GeometrySpec
+from woundsweep.core.schema import WOUND_ZONE
 from woundsweep.mesh.build import MeshData, build_mesh
 from woundsweep.mesh.refine import refine_uniform
-from woundsweep.mesh.spec import GeometrySpec
-from woundsweep.schema import WOUND_ZONE
 
 
 def volumes(points: np.ndarray, cells: np.ndarray) -> np.ndarray:

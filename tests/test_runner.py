@@ -23,15 +23,15 @@ import pytest
 import yaml
 
 from woundsweep.cli import COMMANDS
-from woundsweep.faults import FaultSpec, parse_faults
-from woundsweep.sweep.classify import stability_note
-from woundsweep.sweep.grid import load_run
-from woundsweep.sweep.jitlock import JIT_TIMEOUT_RE, clear_stale_jit_locks, lock_state
-from woundsweep.sweep.results import read_results
-from woundsweep.sweep.shards import partition
+from woundsweep.config.manifest import load_run
+from woundsweep.core.faults import FaultSpec, parse_faults
+from woundsweep.execution.classify import stability_note
+from woundsweep.execution.jitlock import JIT_TIMEOUT_RE, clear_stale_jit_locks, lock_state
+from woundsweep.execution.shards import partition
+from woundsweep.store.reader import read_results
 
 WS = [sys.executable, "-m", "woundsweep"]
-FORKSERVER = b"woundsweep.sweep.forkserver"
+FORKSERVER = b"woundsweep.execution.forkserver"
 needs_solve = pytest.mark.skipif(
     "solve" not in COMMANDS, reason="`woundsweep solve` is not registered in woundsweep/cli.py yet"
 )
@@ -137,7 +137,7 @@ def test_parse_faults() -> None:
     [("exit:5", 5), ("fail", 1), ("segv", -signal.SIGSEGV), ("exit:0@3", None), ("fail#2", None)],
 )
 def test_fault_switch_in_a_process(fault: str, returncode: int | None) -> None:
-    code = "from woundsweep.faults import maybe_inject; maybe_inject(0); print('not injected')"
+    code = "from woundsweep.core.faults import maybe_inject; maybe_inject(0); print('not injected')"
     res = subprocess.run(
         [sys.executable, "-c", code],
         env=dict(os.environ, WOUNDSWEEP_FAULT=fault, WOUNDSWEEP_ATTEMPT="1"),

@@ -8,10 +8,11 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from woundsweep.config.geometry import GeometrySpec
+from woundsweep.config.manifest import expand
+from woundsweep.config.sweep import load_sweep
+from woundsweep.execution.shards import Shard, estimate_cost, parse_shard, partition, shard_jobs
 from woundsweep.mesh.build import build_mesh
-from woundsweep.mesh.spec import GeometrySpec
-from woundsweep.sweep.grid import expand, load_sweep
-from woundsweep.sweep.shards import Shard, estimate_cost, parse_shard, partition, shard_jobs
 
 ROOT = Path(__file__).resolve().parent.parent
 

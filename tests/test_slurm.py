@@ -29,9 +29,10 @@ import pytest
 import yaml
 from slurm_cluster import ClusterError, SlurmCluster, start_cluster, unavailable_reason
 
-from woundsweep.sweep.grid import expand, load_sweep
-from woundsweep.sweep.shards import Shard, estimate_cost, partition
-from woundsweep.sweep.slurm import (
+from woundsweep.config.manifest import expand
+from woundsweep.config.sweep import load_sweep
+from woundsweep.execution.shards import Shard, estimate_cost, partition
+from woundsweep.execution.slurm import (
     SCRIPT_NAMES,
     SlurmOptions,
     mem_bytes,
@@ -454,7 +455,7 @@ def _store(rd: Path) -> pd.DataFrame:
 def _runner_default_stages() -> range:
     """The stages `woundsweep run` runs when the scripts pass no --stages."""
     from woundsweep.commands.run import cmd as run_cmd
-    from woundsweep.schema import parse_stage_range
+    from woundsweep.core.schema import parse_stage_range
 
     (text,) = [p.default for p in run_cmd.params if p.name == "stages_text"]
     a, b = parse_stage_range(text)

@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 import yaml
 
-from woundsweep.errors import SolverError
-from woundsweep.model.job import stress_summary
-from woundsweep.schema import StageResult, parse_stage_range
+from woundsweep.core.errors import SolverError
+from woundsweep.core.schema import StageResult, parse_stage_range
+from woundsweep.physics.job import stress_summary
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -70,7 +70,7 @@ def test_nodal_p99_max_and_location() -> None:
 
 
 def test_p99_and_maximum_over_samples() -> None:
-    from woundsweep.model.forms import StressSamples
+    from woundsweep.physics.forms import StressSamples
 
     # Two cells of volume 1 and 3, two samples each holding half of its cell.
     cells = np.array([[0, 1, 2, 3], [4, 1, 2, 3]])
@@ -104,7 +104,7 @@ def test_p99_and_maximum_over_samples() -> None:
 def test_samples_without_stress_are_left_out() -> None:
     """A sample with det F <= 0 (or no finite value) holds no stress: p99 and the maximum
     come from the others; with none left they are NaN."""
-    from woundsweep.model.forms import StressSamples
+    from woundsweep.physics.forms import StressSamples
 
     cells = np.array([[0, 1, 2, 3], [4, 1, 2, 3]])
     vol, mid = np.array([1.0, 1.0]), np.zeros((2, 3))
@@ -136,7 +136,7 @@ def test_parse_stage_range() -> None:
 
 
 def test_stage_result_fields_match_the_design_contract() -> None:
-    from woundsweep.sweep.results import STAGE_FIELDS
+    from woundsweep.store.reader import STAGE_FIELDS
 
     assert set(StageResult._fields) == {"stage", "status", *STAGE_FIELDS}
 
@@ -162,15 +162,14 @@ def run_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return _run_dir(tmp_path_factory.mktemp("solve"))
 
 
-def test_job_spec_takes_the_sweeps_element_degree(tmp_path: Path) -> None:
+def test_job_geometry_takes_the_sweeps_element_degree(tmp_path: Path) -> None:
     """A P2 sweep's meshes are P2 meshes (edges twice as long); the mesh cache tells them apart."""
-    from woundsweep.model.job import job_row, job_spec
-    from woundsweep.sweep.grid import load_run
+    from woundsweep.config.manifest import load_run
 
     for degree in (1, 2):
         (tmp_path / str(degree)).mkdir()
         run = load_run(_run_dir(tmp_path / str(degree), {"element_degree": degree}))
-        assert job_spec(run, job_row(run, 0)).element_degree == degree
+        assert run.geometry(run.job(0)).element_degree == degree
 
 
 @pytest.mark.fem
@@ -178,8 +177,8 @@ def test_solve_writes_the_design_output(run_dir: Path, capsys: pytest.CaptureFix
     import h5py
 
     from woundsweep.cli import main
-    from woundsweep.solverfile import read_solver_file
-    from woundsweep.sweep.grid import load_run
+    from woundsweep.config.manifest import load_run
+    from woundsweep.store.solverfile import read_solver_file
 
     out = run_dir / "job0.h5"
     assert main(["solve", str(run_dir), "--job", "0", "--out", str(out)]) == 0
@@ -261,7 +260,7 @@ def test_fault_switch_fires_before_solving(run_dir: Path) -> None:
 
 
 def _different_job(run_dir: Path) -> int:
-    from woundsweep.sweep.grid import load_run
+    from woundsweep.config.manifest import load_run
 
     m = load_run(run_dir).manifest
     first = m.iloc[0]
@@ -281,7 +280,7 @@ def test_second_job_with_other_parameters_compiles_nothing(
     compiled forms (counted at FFCx's compile step, which a cache hit never reaches)."""
     import ffcx.codegeneration.jit as ffcx_jit
 
-    from woundsweep.model.job import solve_job
+    from woundsweep.physics.job import solve_job
 
     compiled: list[str] = []
     real = ffcx_jit._compile_objects

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import scipy.sparse
 
-from woundsweep.model.stability import lowest_eigenvalues
+from woundsweep.physics.stability import lowest_eigenvalues
 
 
 def _laplacian_like(n: int, shift: float) -> scipy.sparse.csr_matrix:

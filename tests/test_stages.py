@@ -11,7 +11,7 @@ from typing import NamedTuple
 import numpy as np
 import pytest
 
-from woundsweep.model.materials import homogeneous_state
+from woundsweep.physics.materials import homogeneous_state
 
 pytestmark = pytest.mark.fem
 
@@ -64,7 +64,7 @@ def box_patch(n_xy: int = 6, rotate: bool = False) -> Patch:
 
 def homogeneous_field(points: np.ndarray, skin: str, angle: float) -> np.ndarray:
     """Displacement of the per-layer homogeneous pre-stretch (bottom fixed at z = -T_TOTAL)."""
-    from woundsweep.model.materials import JobMaterials
+    from woundsweep.physics.materials import JobMaterials
 
     mats = JobMaterials.table2(skin, angle)
     l_d = homogeneous_state(mats.dermis, mats.tsf).lambda3
@@ -84,15 +84,15 @@ def rel_l2(a: np.ndarray, b: np.ndarray) -> float:
 
 @pytest.fixture(scope="module")
 def box_model():
-    from woundsweep.model.stages import WoundModel
+    from woundsweep.physics.stages import WoundModel
 
     return WoundModel(box_patch())
 
 
 @pytest.fixture(scope="module")
 def cylinder_mesh():
+    from woundsweep.config.geometry import GeometrySpec
     from woundsweep.mesh.build import build_mesh
-    from woundsweep.mesh.spec import GeometrySpec
 
     # t_d = 1, subcutis factor 1, patch factor 2 (L = 4), width factor 0.3, aspect 0, m = 0.3
     return build_mesh(GeometrySpec.cylindrical(1.0, 1.0, 4.0, 1.2, 0.0, 0.3))
@@ -102,7 +102,7 @@ def cylinder_mesh():
 @pytest.mark.parametrize("angle", [0.0, 90.0])
 def test_unwounded_stage2_reproduces_stage1(box_model, skin: str, angle: float) -> None:
     """Lateral traction of healthy skin (stage 2) gives the Dirichlet pre-tension (stage 1)."""
-    from woundsweep.model.materials import JobMaterials
+    from woundsweep.physics.materials import JobMaterials
 
     m = box_model
     m.set_materials(JobMaterials.table2(skin, angle))
@@ -123,7 +123,7 @@ def test_unwounded_stage2_reproduces_stage1(box_model, skin: str, angle: float) 
 def test_stage1_starts_from_the_unwounded_solution(box_model, skin: str) -> None:
     """Stage 1's Newton start is the per-layer homogeneous state, which solves the unwounded
     patch exactly: one Newton step (the full-step convergence check) is all it takes."""
-    from woundsweep.model.materials import JobMaterials
+    from woundsweep.physics.materials import JobMaterials
 
     m = box_model
     m.set_materials(JobMaterials.table2(skin, 0.0))
@@ -138,7 +138,7 @@ def test_unwounded_oblique_orientation(box_model, skin: str) -> None:
     """At 45 degrees the healthy-skin traction has shear (P_xy != 0). Stage 2 applies it and
     gives the homogeneous state; stage 1's lateral faces are shear-free while its deep face is
     held, so the patch cannot take that state: the two stages differ by a few percent."""
-    from woundsweep.model.materials import JobMaterials
+    from woundsweep.physics.materials import JobMaterials
 
     m = box_model
     m.set_materials(JobMaterials.table2(skin, 45.0))
@@ -157,8 +157,8 @@ def test_lateral_facets_split_by_layer(box_model) -> None:
     """The derived lateral facet ids hold exactly each layer's share of the four side faces."""
     import ufl
 
-    from woundsweep import compat
-    from woundsweep.model.domain import LATERAL_DERMIS, LATERAL_SUBCUTIS
+    from woundsweep.physics import compat
+    from woundsweep.physics.domain import LATERAL_DERMIS, LATERAL_SUBCUTIS
 
     m = box_model
     ds = ufl.Measure("ds", domain=m.domain.mesh, subdomain_data=m.domain.solver_facet_mt)
@@ -186,8 +186,8 @@ def assemble_scalar(form) -> float:
 def test_rotating_the_orientation_by_90_degrees_rotates_the_solution(angle: float) -> None:
     """Patch P at orientation t and the same patch turned by +90 degrees at t + 90 are the same
     physical problem: equal von Mises per cell, and stage-1 displacements rotated by 90."""
-    from woundsweep.model.materials import JobMaterials
-    from woundsweep.model.stages import WoundModel
+    from woundsweep.physics.materials import JobMaterials
+    from woundsweep.physics.stages import WoundModel
 
     a = WoundModel(box_patch(rotate=False))
     b = WoundModel(box_patch(rotate=True))
@@ -215,8 +215,8 @@ def test_rotating_the_orientation_by_90_degrees_rotates_the_solution(angle: floa
 
 
 def test_stage2_closes_the_wound_and_stage3_reports_the_gap(cylinder_mesh) -> None:
-    from woundsweep.model.materials import JobMaterials
-    from woundsweep.model.stages import WoundModel
+    from woundsweep.physics.materials import JobMaterials
+    from woundsweep.physics.stages import WoundModel
 
     m = WoundModel(cylinder_mesh)
     w = 1.2
@@ -264,9 +264,9 @@ def test_stage2_closes_the_wound_and_stage3_reports_the_gap(cylinder_mesh) -> No
 
 
 def test_stiff_skin_has_higher_maximal_stress_than_soft(cylinder_mesh) -> None:
-    from woundsweep.model.job import run_stages
-    from woundsweep.model.materials import JobMaterials
-    from woundsweep.model.stages import WoundModel
+    from woundsweep.physics.job import run_stages
+    from woundsweep.physics.materials import JobMaterials
+    from woundsweep.physics.stages import WoundModel
 
     m = WoundModel(cylinder_mesh)
     p99 = {}
@@ -279,8 +279,8 @@ def test_stiff_skin_has_higher_maximal_stress_than_soft(cylinder_mesh) -> None:
 
 
 def test_unconverged_stage_stops_later_stages(box_model) -> None:
-    from woundsweep.model.job import run_stages
-    from woundsweep.model.materials import JobMaterials
+    from woundsweep.physics.job import run_stages
+    from woundsweep.physics.materials import JobMaterials
     from woundsweep.solver import NewtonSettings, NewtonSolver
 
     m = box_model
@@ -298,7 +298,7 @@ def test_unconverged_stage_stops_later_stages(box_model) -> None:
 
 
 def test_newton_statuses_inverted_and_linear_solver_failed(box_model) -> None:
-    from woundsweep.model.materials import JobMaterials
+    from woundsweep.physics.materials import JobMaterials
     from woundsweep.solver import NewtonSettings, NewtonSolver
 
     m = box_model
@@ -328,7 +328,7 @@ def test_newton_statuses_inverted_and_linear_solver_failed(box_model) -> None:
 def test_stage_iteration_budget_ends_a_long_continuation(box_model) -> None:
     """A stage that needs more Newton steps than ``max_stage_iterations`` in all its load
     increments stops as ``max-iterations`` before the end of its load."""
-    from woundsweep.model.materials import JobMaterials
+    from woundsweep.physics.materials import JobMaterials
     from woundsweep.solver import NewtonSettings, NewtonSolver
 
     m = box_model

@@ -22,8 +22,8 @@ CONVERGED = "converged"
 
 @pytest.fixture(scope="module")
 def cylinder_mesh():
+    from woundsweep.config.geometry import GeometrySpec
     from woundsweep.mesh.build import build_mesh
-    from woundsweep.mesh.spec import GeometrySpec
 
     # Demo job 0: t_d = 1, subcutis 1, L = 4, width 1.2, aspect 0 (depth 0.6), m = 0.3.
     return build_mesh(GeometrySpec.cylindrical(1.0, 1.0, 4.0, 1.2, 0.0, 0.3))
@@ -31,8 +31,8 @@ def cylinder_mesh():
 
 @pytest.fixture(scope="module")
 def wedge_mesh():
+    from woundsweep.config.geometry import GeometrySpec
     from woundsweep.mesh.build import build_mesh
-    from woundsweep.mesh.spec import GeometrySpec
 
     # Demo job 18: a deep, narrow wedge (width 1.2, depth 1.0).
     return build_mesh(GeometrySpec.wedge(1.0, 1.0, 4.0, 1.2, 1.0, 0.3))
@@ -56,8 +56,8 @@ def _energy_slope(m, u0: np.ndarray, v: np.ndarray, eps: float):
 
 
 def _run(mesh, angle: float, skin: str = "stiff"):
-    from woundsweep.model.materials import JobMaterials
-    from woundsweep.model.stages import WoundModel
+    from woundsweep.physics.materials import JobMaterials
+    from woundsweep.physics.stages import WoundModel
 
     m = WoundModel(mesh)
     m.set_materials(JobMaterials.table2(skin, angle))
@@ -121,8 +121,8 @@ def test_the_zone_tie_is_inert_at_0_degrees(cylinder_mesh) -> None:
     assert m.tie is not None and len(m.tie) > 0
     assert all(o.diagnostics["tie_force_mN"] < 1e-9 * o.diagnostics["contact_force_mN"]
                for o in outs[3:])  # fmt: skip
-    from woundsweep.model.materials import JobMaterials
-    from woundsweep.model.stages import WoundModel
+    from woundsweep.physics.materials import JobMaterials
+    from woundsweep.physics.stages import WoundModel
 
     free = WoundModel(cylinder_mesh)
     free.problem.tie = None
@@ -160,9 +160,9 @@ def test_the_zone_tie_holds_the_flanks_at_45_degrees(cylinder_mesh) -> None:
 def test_unconverged_stage_3_does_not_stop_stages_4_to_6(cylinder_mesh) -> None:
     """Stage 4 restarts from stage 2: with stage 3 starved, stages 4-6 run and give the
     results of a run whose stage 3 converged."""
-    from woundsweep.model.job import run_stages
-    from woundsweep.model.materials import JobMaterials
-    from woundsweep.model.stages import WoundModel
+    from woundsweep.physics.job import run_stages
+    from woundsweep.physics.materials import JobMaterials
+    from woundsweep.physics.stages import WoundModel
     from woundsweep.solver.newton import MAX_ITERATIONS, NewtonSolver
 
     mats = JobMaterials.table2("stiff", 0.0)
@@ -185,9 +185,9 @@ def test_unconverged_stage_3_does_not_stop_stages_4_to_6(cylinder_mesh) -> None:
 
 
 def test_unconverged_contact_stage_is_recorded_as_such(cylinder_mesh) -> None:
-    from woundsweep.model.job import run_stages
-    from woundsweep.model.materials import JobMaterials
-    from woundsweep.model.stages import CONTACT_START_kPa, WoundModel
+    from woundsweep.physics.job import run_stages
+    from woundsweep.physics.materials import JobMaterials
+    from woundsweep.physics.stages import CONTACT_START_kPa, WoundModel
     from woundsweep.solver.newton import MAX_ITERATIONS, NewtonSolver
 
     m = WoundModel(cylinder_mesh)
@@ -235,8 +235,8 @@ def test_contact_stage_potential_is_that_of_the_residual(cylinder_mesh) -> None:
     has a potential: its directional derivative is R . v (central differences), and the closure force is the same at any state (tau times the stage-2 area of
     the flank). In stage 3 the traction follows the deformed area: no potential, and the force
     changes with the state."""
-    from woundsweep.model.materials import JobMaterials
-    from woundsweep.model.stages import WoundModel
+    from woundsweep.physics.materials import JobMaterials
+    from woundsweep.physics.stages import WoundModel
 
     m = WoundModel(cylinder_mesh)
     m.set_materials(JobMaterials.table2("stiff", 0.0))
@@ -285,8 +285,8 @@ def test_contact_stages_5_and_6_start_in_equilibrium(cylinder_mesh) -> None:
     out-of-balance force that the stage releases holds only its convergence residual. (It
     once was computed with contact off, so it held the contact forces as well: a jump of
     tens of mN at the first increment, which failed stage 5 of a 45-degree paper job.)"""
-    from woundsweep.model.materials import JobMaterials
-    from woundsweep.model.stages import WoundModel
+    from woundsweep.physics.materials import JobMaterials
+    from woundsweep.physics.stages import WoundModel
 
     m = WoundModel(cylinder_mesh)
     m.set_materials(JobMaterials.table2("stiff", 0.0))
@@ -311,10 +311,10 @@ def test_stage_4_starts_from_a_stable_state_on_an_overlapping_wedge() -> None:
     lower flanks overlap, and at a penalty of 100 kPa the contact's curvature term makes the
     stage-4 starting state a saddle of the potential (Newton cycled there). At the starting
     penalty the free-dof Hessian there is positive definite."""
+    from woundsweep.config.geometry import GeometrySpec
     from woundsweep.mesh.build import build_mesh
-    from woundsweep.mesh.spec import GeometrySpec
-    from woundsweep.model.materials import JobMaterials
-    from woundsweep.model.stages import CONTACT_START_kPa, WoundModel
+    from woundsweep.physics.materials import JobMaterials
+    from woundsweep.physics.stages import CONTACT_START_kPa, WoundModel
 
     m = WoundModel(build_mesh(GeometrySpec.wedge(1.0, 2.0, 6.0, 3.0, 1.5, 0.7)))
     m.set_materials(JobMaterials.table2("stiff", 0.0))

@@ -22,13 +22,14 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 
-from woundsweep.errors import StoreError
-from woundsweep.schema import FailureClass, StageResult
-from woundsweep.solverfile import read_solver_file
-from woundsweep.sweep.grid import load_run
-from woundsweep.sweep.results import STAGE_FIELDS, read_results, summarize
-from woundsweep.sweep.shards import estimate_cost
-from woundsweep.sweep.store import JobOutcome, Store
+from woundsweep.config.manifest import load_run
+from woundsweep.core.errors import StoreError
+from woundsweep.core.schema import FailureClass, StageResult
+from woundsweep.execution.shards import estimate_cost
+from woundsweep.execution.summary import summarize
+from woundsweep.store.reader import STAGE_FIELDS, read_results
+from woundsweep.store.solverfile import read_solver_file
+from woundsweep.store.writer import JobOutcome, Store
 
 ROOT = Path(__file__).resolve().parent.parent
 WS = [sys.executable, "-m", "woundsweep"]
@@ -399,8 +400,8 @@ def test_fingerprint_covers_what_determines_a_result(run_dir: Path) -> None:
     """Each material value of the job's own skin type, the subcutis, every stage and solver
     setting change the fingerprint; another skin type's values, the analysis settings and the
     sweep's name do not; the job id never does."""
-    from woundsweep.sweep.grid import parse_sweep
-    from woundsweep.sweep.identity import result_fingerprint
+    from woundsweep.config.sweep import parse_sweep
+    from woundsweep.store.identity import result_fingerprint
 
     run = load_run(run_dir)
     job = run.manifest[run.manifest["skin_type"] == "stiff"].iloc[0]
@@ -432,7 +433,7 @@ def test_fingerprint_covers_what_determines_a_result(run_dir: Path) -> None:
 
 def test_fingerprint_covers_the_statistics_version(run_dir: Path, monkeypatch) -> None:
     """Results whose stress statistics were computed another way are stale."""
-    from woundsweep.sweep import identity
+    from woundsweep.store import identity
 
     run = load_run(run_dir)
     job = run.manifest.iloc[0]

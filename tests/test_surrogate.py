@@ -17,13 +17,14 @@ from woundsweep.analysis import (
     encode_features,
     fit_failure,
     fit_surrogate,
-    resolve_settings,
     sobol_indices,
 )
 from woundsweep.analysis.conformal import half_width, half_widths
 from woundsweep.analysis.regression import predict_log
 from woundsweep.analysis.sensitivity import SobolInput, surrogate_sobol
-from woundsweep.sweep.grid import DEFAULTS, expand, parse_sweep
+from woundsweep.config.analysis import resolve_settings
+from woundsweep.config.manifest import expand
+from woundsweep.config.sweep import DEFAULTS, parse_sweep
 
 # Few, fast rounds; a larger test share (30 % of the geometries) so that the coverage
 # estimates rest on ~3,500 rows of ~65 geometries.

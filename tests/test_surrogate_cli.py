@@ -16,8 +16,8 @@ import pytest
 from synthetic_store import SMALL_SWEEP, depth_stress, write_store
 
 from woundsweep.cli import main
-from woundsweep.sweep.grid import DEFAULTS
-from woundsweep.sweep.results import read_results
+from woundsweep.config.sweep import DEFAULTS
+from woundsweep.store.reader import read_results
 
 # 12 geometries x 3 skins x 3 orientations = 108 jobs x 6 stages = 648 rows.
 SWEEP = {

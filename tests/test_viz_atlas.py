@@ -12,10 +12,10 @@ import pytest
 from viz_store import displacement, make_store, von_mises
 
 from woundsweep.cli import main
-from woundsweep.errors import StoreError
+from woundsweep.config.manifest import load_run
+from woundsweep.core.errors import StoreError
 from woundsweep.mesh.cache import load_mesh, mesh_path
-from woundsweep.sweep.grid import load_run
-from woundsweep.sweep.results import read_results
+from woundsweep.store.reader import read_results
 from woundsweep.viz import atlas as atlas_mod
 from woundsweep.viz.atlas import parse_views
 

@@ -13,10 +13,10 @@ import pytest
 from viz_store import displacement, make_store, von_mises
 
 from woundsweep.cli import main
+from woundsweep.config.manifest import load_run
+from woundsweep.config.paper import ClosureZone
+from woundsweep.core.schema import DERMIS, SUBCUTIS
 from woundsweep.mesh.cache import load_mesh, mesh_path
-from woundsweep.model.parameters import ClosureZone
-from woundsweep.schema import DERMIS, SUBCUTIS
-from woundsweep.sweep.grid import load_run
 from woundsweep.viz.surface import closure_zone_facets
 
 vtk = pytest.importorskip("vtk", reason="vtk (the independent VTU reader) is not installed")
@@ -159,7 +159,7 @@ def test_bad_input_one_line_exit_2(store: Path, tmp_path: Path, capsys, args, ne
 
 @pytest.mark.fem
 def test_closure_zone_matches_the_solver(store: Path) -> None:
-    from woundsweep.model.domain import WoundDomain
+    from woundsweep.physics.domain import WoundDomain
 
     run = load_run(store)
     job = run.manifest.iloc[0]

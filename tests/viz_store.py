@@ -18,12 +18,13 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from woundsweep.config.geometry import GeometrySpec
+from woundsweep.config.manifest import expand
+from woundsweep.config.sweep import parse_sweep
+from woundsweep.core.schema import ExitCode, FailureClass, StageStatus
 from woundsweep.mesh.cache import get_mesh
-from woundsweep.mesh.spec import GeometrySpec
-from woundsweep.schema import ExitCode, FailureClass, StageStatus
-from woundsweep.solverfile import read_solver_file, write_solver_file
-from woundsweep.sweep.grid import expand, parse_sweep
-from woundsweep.sweep.store import JobOutcome, Store
+from woundsweep.store.solverfile import read_solver_file, write_solver_file
+from woundsweep.store.writer import JobOutcome, Store
 
 __all__ = ["SWEEP", "displacement", "make_store", "von_mises"]
 

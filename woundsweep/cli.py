@@ -16,7 +16,7 @@ from typing import NoReturn
 import click
 
 from . import __version__
-from .errors import WoundsweepError
+from .core.errors import WoundsweepError, report
 
 __all__ = ["COMMANDS", "main"]
 
@@ -104,8 +104,7 @@ def main(argv: list[str] | None = None) -> int:
         # With standalone_mode=False click returns ctx.exit()'s code instead of raising Exit.
         rv = cli.main(args=argv, prog_name="woundsweep", standalone_mode=False)
     except WoundsweepError as err:
-        click.echo(f"woundsweep: error: {err}", err=True)
-        return err.exit_code
+        return report(err)
     except click.exceptions.Abort:
         click.echo("woundsweep: aborted", err=True)
         return 130
@@ -115,9 +114,7 @@ def main(argv: list[str] | None = None) -> int:
     except click.exceptions.Exit as err:
         return err.exit_code
     except OSError as err:  # a filesystem error on a path no command anticipated: one line too
-        where = f"{err.filename}: " if err.filename else ""
-        click.echo(f"woundsweep: error: {where}{err.strerror or err}", err=True)
-        return 2
+        return report(err)
     return rv if isinstance(rv, int) else 0
 
 
@@ -126,8 +123,7 @@ def console_main() -> NoReturn:
 
     Standard streams and logging are flushed, but the interpreter's teardown is skipped:
     pyarrow's thread pools can abort it (``std::terminate`` from a still-joinable thread,
-    apache/arrow#34314), turning a finished command into SIGABRT (seen once in CI:
-    ``woundsweep slurm`` with a bad option printed its one-line error, then exited -6).
+    apache/arrow#34314), which would turn a finished command into SIGABRT.
     Every file the commands write is closed (and atomically renamed) before they return.
     """
     exit_now(main())

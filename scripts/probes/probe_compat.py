@@ -1,9 +1,9 @@
-"""Exercise woundsweep.compat on this DOLFINx and check its invariants independently.
+"""Exercise woundsweep.physics.compat on this DOLFINx and check its invariants independently.
 
 Run: /work/main/.venv/bin/python scripts/probes/probe_compat.py
      scripts/dolfinx-latest.sh --run python3 scripts/probes/probe_compat.py
 
-Each helper of woundsweep.compat that exists is called on a small two-layer block (Kuhn-split
+Each helper of woundsweep.physics.compat that exists is called on a small two-layer block (Kuhn-split
 cubes, top half tagged 1, bottom half 2, the six sides tagged 11-16) and its result is checked
 against geometry (coordinates, centroids), not against the helper's own output. Helpers that do
 not exist (yet) are reported as absent. Exit status: number of failed checks.
@@ -95,7 +95,7 @@ def main() -> int:
 
     import dolfinx
 
-    from woundsweep import compat
+    from woundsweep.physics import compat
 
     logging.getLogger().setLevel(logging.WARNING)
     print(

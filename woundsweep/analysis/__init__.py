@@ -6,7 +6,7 @@ class. Two split schemes, ``random`` (the paper's) and ``geometry`` (no physical
 two sets), are fitted with XGBoost and evaluated side by side. Stresses are in kPa, lengths
 in mm.
 
-Modules: `settings` (features, constants, `ModelSettings`), `data` (rows from the store's
+Modules: `settings` (features and constants), `data` (rows from the store's
 validated reader, the model matrix), `splits` (quantile classes, the two schemes),
 `training` (XGBoost), `evaluation` (scores, importances, TreeSHAP), `paper` (stiff against
 soft, locations of the maximum), `fitting` (one scheme end to end, `SchemeFit`),
@@ -21,7 +21,7 @@ re-exported lazily, so importing the package loads neither XGBoost nor matplotli
 
 from __future__ import annotations
 
-from ..lazy import lazy_exports
+from ..core.lazy import lazy_exports
 
 __all__ = [
     "FEATURES",
@@ -33,7 +33,6 @@ __all__ = [
     "STRESS",
     "AnalysisOutput",
     "LoadedModel",
-    "ModelSettings",
     "Prediction",
     "SchemeFit",
     "Split",
@@ -57,7 +56,6 @@ __all__ = [
     "quantile_edges",
     "random_split",
     "resolve_model_path",
-    "resolve_settings",
     "run_analysis",
     "select_rows",
     "shap_importance",
@@ -75,8 +73,6 @@ _HOME = {
     "SCHEMES": "settings",
     "SHAPE_CODES": "settings",
     "STRESS": "settings",
-    "ModelSettings": "settings",
-    "resolve_settings": "settings",
     "encode_features": "data",
     "load_results": "data",
     "select_rows": "data",

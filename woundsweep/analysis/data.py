@@ -6,6 +6,7 @@ matrix encodes the wound shape by `SHAPE_CODES` and the skin type by its Fung ``
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -13,9 +14,9 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from ..errors import AnalysisError
-from ..schema import StageStatus
-from ..sweep.results import read_results
+from ..core.errors import AnalysisError
+from ..core.schema import StageStatus
+from ..store.reader import read_results
 from .settings import FEATURES, REQUIRED_COLUMNS, SHAPE_CODES, STRESS
 
 __all__ = [
@@ -31,14 +32,15 @@ __all__ = [
 
 def sweep_settings(run_dir: Path) -> tuple[dict[str, Any], dict[str, float]]:
     """``Sweep.analysis`` and skin type -> Fung c (kPa) of the run, or the paper's defaults."""
-    from ..sweep.grid import DEFAULTS, load_run
+    from ..config.manifest import load_run
+    from ..config.paper import Materials
 
     if (run_dir / "sweep.yaml").is_file() and (run_dir / "manifest.parquet").is_file():
         sweep = load_run(run_dir).sweep
-        analysis, materials = dict(sweep.analysis), sweep.materials
+        analysis, materials = dataclasses.asdict(sweep.analysis), sweep.materials
     else:
-        analysis, materials = {}, DEFAULTS["materials"]
-    return analysis, {name: float(p["c_kPa"]) for name, p in materials["skin_types"].items()}
+        analysis, materials = {}, Materials.table2()
+    return analysis, {name: float(p.c_kPa) for name, p in materials.skin_types.items()}
 
 
 def skin_codes(run_dir: str | Path) -> dict[str, float]:

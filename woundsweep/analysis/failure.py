@@ -17,16 +17,16 @@ import numpy as np
 import pandas as pd
 
 from .. import __version__
-from ..schema import FailureClass
+from ..config.analysis import ModelSettings
+from ..core.schema import FailureClass
+from ..core.versions import FAILURE_FORMAT
 from .data import encode_features
 from .evaluation import feature_importance
 from .settings import (
     CONVERGENCE_FAILURES,
-    FAILURE_FORMAT,
     FEATURES,
     JOB_FEATURES,
     MIN_FAILED_JOBS,
-    ModelSettings,
 )
 from .splits import geometry_groups, geometry_split
 

@@ -18,7 +18,7 @@ import pandas as pd  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 from matplotlib.patches import Rectangle  # noqa: E402
 
-from ..model.profiles import PROFILE_LINES  # noqa: E402
+from ..core.schema import PROFILE_LINES  # noqa: E402
 from .profile_locations import bin_edges, profile_counts  # noqa: E402
 from .settings import STAGE_GROUPS  # noqa: E402
 

@@ -13,9 +13,11 @@ import numpy as np
 import pandas as pd
 
 from .. import __version__
-from ..errors import AnalysisError
+from ..config.analysis import ModelSettings
+from ..core.errors import AnalysisError
+from ..core.versions import MODEL_FORMAT
 from .evaluation import evaluate, feature_importance
-from .settings import FEATURES, MODEL_FORMAT, SCHEMES, SHAPE_CODES, STRESS, ModelSettings
+from .settings import FEATURES, SCHEMES, SHAPE_CODES, STRESS
 from .splits import (
     Split,
     assign_quantiles,

@@ -15,9 +15,9 @@ import json
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, NamedTuple
 
-from ..errors import AnalysisError
-from ..fsutil import atomic_write_bytes
-from .settings import FAILURE_FORMAT, MODEL_FORMAT, SURROGATE_FORMAT
+from ..core.errors import AnalysisError
+from ..core.fsutil import atomic_write_bytes
+from ..core.versions import FAILURE_FORMAT, MODEL_FORMAT, SURROGATE_FORMAT
 
 if TYPE_CHECKING:
     from .failure import FailureFit

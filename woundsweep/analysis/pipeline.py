@@ -16,8 +16,9 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from .. import __version__
-from ..errors import AnalysisError
-from ..fsutil import atomic_write_bytes
+from ..config.analysis import resolve_settings
+from ..core.errors import AnalysisError
+from ..core.fsutil import atomic_write_bytes
 from .data import drop_orphans, encode_features, load_results, select_rows, sweep_settings
 from .failure import fit_failure
 from .fitting import fit_scheme
@@ -32,7 +33,6 @@ from .settings import (
     MIN_ROWS_PER_QUANTILE,
     SCHEMES,
     STRESS,
-    resolve_settings,
 )
 
 __all__ = ["AnalysisOutput", "run_analysis"]

@@ -14,7 +14,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from ..errors import AnalysisError
+from ..core.errors import AnalysisError
 from .model_io import LoadedModel
 from .settings import FEATURES, SHAPE_CODES
 from .training import predict_proba

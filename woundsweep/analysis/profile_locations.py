@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from ..model.profiles import PROFILE_LINES, PROFILE_POINTS
+from ..core.schema import PROFILE_LINES, PROFILE_POINTS
 from .settings import STAGE_GROUPS
 
 __all__ = [

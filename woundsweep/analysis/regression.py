@@ -17,10 +17,12 @@ import numpy as np
 import pandas as pd
 
 from .. import __version__
-from ..errors import AnalysisError
+from ..config.analysis import ModelSettings
+from ..core.errors import AnalysisError
+from ..core.versions import SURROGATE_FORMAT
 from .conformal import calibrate, coverage
 from .evaluation import feature_importance, shap_importance
-from .settings import COVERAGE_LEVELS, FEATURES, STRESS, SURROGATE_FORMAT, ModelSettings
+from .settings import COVERAGE_LEVELS, FEATURES, STRESS
 from .splits import geometry_groups, geometry_split
 
 __all__ = ["SurrogateFit", "SurrogateSplit", "fit_surrogate", "predict_log", "surrogate_split"]

@@ -6,7 +6,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from ..fsutil import atomic_write_bytes
+from ..core.fsutil import atomic_write_bytes
 from .mesh_sensitivity import report_lines as mesh_report_lines
 from .profile_locations import report_lines as profile_report_lines
 

@@ -16,7 +16,7 @@ from typing import NamedTuple
 import numpy as np
 import pandas as pd
 
-from ..errors import AnalysisError
+from ..core.errors import AnalysisError
 
 __all__ = [
     "Split",
@@ -65,7 +65,7 @@ def random_split(n: int, train_fraction: float, validation_fraction: float, seed
 
 def geometry_groups(rows: pd.DataFrame) -> np.ndarray:
     """Integer id of each row's physical geometry (geometry keys without the mesh size)."""
-    from ..sweep.grid import GEOMETRY_KEYS
+    from ..config.sweep import GEOMETRY_KEYS
 
     keys = [k for k in GEOMETRY_KEYS if k != "mesh_size_factor"]
     # NaN is not equal to itself: turn the not-applicable factors into a sentinel first.

@@ -6,7 +6,8 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from .settings import FEATURES, ModelSettings
+from ..config.analysis import ModelSettings
+from .settings import FEATURES
 from .splits import Split
 
 __all__ = ["Trained", "predict_proba", "train_model"]

@@ -7,7 +7,7 @@ from typing import Any
 
 import click
 
-from ..errors import AnalysisError
+from ..core.errors import AnalysisError
 
 __all__ = ["cmd", "summary_lines"]
 

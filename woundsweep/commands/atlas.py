@@ -36,8 +36,8 @@ def cmd(run_dir: Path, out: Path | None, views: str) -> None:
     a demo job). The projected size of the chosen views is shown while it builds and the
     sizes are printed at the end.
     """
-    from ..sweep.grid import load_run
-    from ..sweep.results import read_results
+    from ..config.manifest import load_run
+    from ..store.reader import read_results
     from ..viz.atlas import build_atlas, parse_views
 
     run = load_run(run_dir)

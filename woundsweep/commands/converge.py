@@ -20,8 +20,8 @@ from typing import Any
 
 import click
 
-from ..errors import SolverError
-from ..schema import parse_stage_range
+from ..core.errors import SolverError
+from ..core.schema import parse_stage_range
 
 __all__ = ["cmd", "study_lines"]
 
@@ -152,7 +152,7 @@ def cmd(
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     stages = parse_stage_range(stages_text, SolverError)
-    from ..model.convergence import check_refinements, convergence_study, parse_factors
+    from ..studies.convergence import check_refinements, convergence_study, parse_factors
 
     minimum = 1 if refinements is not None else 3
     factors = None if factors_text is None else parse_factors(factors_text, minimum)

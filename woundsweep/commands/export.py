@@ -34,16 +34,16 @@ def cmd(run_dir: Path, job: int | None, all_: bool, out: Path) -> None:
     (Warp By Vector on displacement_mm shows the deformed state). Which stages exist is
     decided by `run --fields`; a stage without a field is named with the reason.
     """
-    from ..sweep.grid import load_run
-    from ..sweep.results import read_results
+    from ..config.manifest import load_run
+    from ..store.reader import read_results
     from ..viz.export import export_job
-    from ..viz.jobdata import job_row, load_job
+    from ..viz.jobdata import load_job
 
     if (job is not None) == all_:
         raise click.UsageError("give exactly one of --job N or --all")
     run = load_run(run_dir)
     if job is not None:
-        row = job_row(run.manifest, job)
+        row = run.job(job)
         rows = read_results(run.run_dir, [str(row["job_id"])])
         info = export_job(load_job(run, row, rows), out)
         stages = [s["stage"] for s in info["stages"] if s["file"]]

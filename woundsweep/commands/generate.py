@@ -8,10 +8,11 @@ from pathlib import Path
 import click
 import pandas as pd
 
-from ..errors import StoreError, SweepError
-from ..fsutil import atomic_write, atomic_write_bytes
-from ..provenance import provenance
-from ..sweep.grid import MANIFEST_COLUMNS, MAX_JOBS, expand, parse_sweep_text, read_sweep_text
+from ..config.manifest import expand
+from ..config.sweep import MANIFEST_COLUMNS, MAX_JOBS, parse_sweep_text, read_sweep_text
+from ..core.errors import StoreError, SweepError
+from ..core.fsutil import atomic_write, atomic_write_bytes
+from ..core.provenance import provenance
 
 __all__ = ["cmd", "generate", "stale_results"]
 
@@ -42,8 +43,9 @@ def stale_results(run_dir: Path, sweep, manifest: pd.DataFrame) -> tuple[int, in
     """
     import pyarrow.parquet as pq
 
-    from ..sweep.identity import FORMAT_VERSION, fingerprints
-    from ..sweep.results import META_KEY, result_files
+    from ..core.versions import RESULT_FORMAT_VERSION
+    from ..store.identity import fingerprints
+    from ..store.reader import META_KEY, result_files
 
     files, _ = result_files(run_dir)
     if not files:
@@ -58,7 +60,7 @@ def stale_results(run_dir: Path, sweep, manifest: pd.DataFrame) -> tuple[int, in
             meta = json.loads((pq.read_schema(p).metadata or {})[META_KEY])
         except Exception:  # noqa: BLE001 - damaged: `run` moves it aside
             continue
-        if meta.get("format") != FORMAT_VERSION or meta.get("fingerprint") != expected[jid]:
+        if meta.get("format") != RESULT_FORMAT_VERSION or meta.get("fingerprint") != expected[jid]:
             stale += 1
     return stale, orphans
 
@@ -144,7 +146,7 @@ def cmd(sweep_file: Path, run_dir: Path, force: bool, max_jobs: int) -> None:
         click.echo(f"{run_dir} is up to date ({n} jobs, same sweep): nothing to do")
         return
     click.echo(f"{n} jobs written to {run_dir / 'manifest.parquet'}")
-    from ..sweep.grid import load_run
+    from ..config.manifest import load_run
 
     run = load_run(run_dir)
     stale, orphans = stale_results(run.run_dir, run.sweep, run.manifest)

@@ -11,12 +11,11 @@ import numpy as np
 import pandas as pd
 from tqdm import tqdm
 
-from ..errors import GeometryError
-from ..fsutil import atomic_write, check_output_file
+from ..config.manifest import Run, load_run
+from ..core.errors import GeometryError, StoreError
+from ..core.fsutil import atomic_write, check_output_file
 from ..mesh.build import MeshData
 from ..mesh.cache import CachedMesh, get_mesh
-from ..model.job import job_spec
-from ..sweep.grid import Run, load_run
 
 __all__ = ["cmd", "mesh_geometry", "write_vtu"]
 
@@ -70,7 +69,7 @@ def write_vtu(path: str | Path, mesh: MeshData) -> None:
 def mesh_geometry(run: Run, row: pd.Series) -> CachedMesh:
     """Build or reuse the mesh of the geometry of manifest ``row`` with the sweep's closure
     zone and element degree (errors name its job)."""
-    spec = job_spec(run, row)  # GeometryError names the job
+    spec = run.geometry(row)  # GeometryError names the job
     try:
         return get_mesh(run.run_dir, str(row["geometry_id"]), spec)
     except GeometryError as err:
@@ -126,18 +125,17 @@ def cmd(
         _mesh_all(run, man)
         return
     if job is not None:
-        hit = man[man["job_index"] == job]
-        if hit.empty:
-            raise click.BadParameter(
-                f"no job {job} (the run has jobs 0-{len(man) - 1})", param_hint="--job"
-            )
-        geometry_id = str(hit["geometry_id"].iloc[0])
+        try:
+            job_row = run.job(job)
+        except StoreError as err:
+            raise click.BadParameter(str(err), param_hint="--job") from None
+        geometry_id = str(job_row["geometry_id"])
     rows = man[man["geometry_id"] == geometry_id]
     if rows.empty:
         raise click.BadParameter(
             f"no geometry {geometry_id!r} in {run_dir}", param_hint="--geometry"
         )
-    row = hit.iloc[0] if job is not None else rows.iloc[0]
+    row = job_row if job is not None else rows.iloc[0]
     got = mesh_geometry(run, row)
     if got.status == "rebuilt":
         click.echo(f"cached mesh rejected ({got.reason}); rebuilt", err=True)

@@ -98,7 +98,7 @@ def cmd(
     unless --allow-extrapolation.
     """
     from ..analysis import load_model, predict_wound
-    from ..errors import AnalysisError
+    from ..core.errors import AnalysisError
 
     try:
         loaded = load_model(model, scheme)

@@ -8,11 +8,11 @@ from pathlib import Path
 import click
 
 from ..clitypes import FiniteFloat
-from ..errors import StoreError
-from ..schema import FailureClass, parse_stage_range
-from ..sweep.runner import RunOptions, RunSummary, run_shard
-from ..sweep.shards import parse_shard
-from ..sweep.store import FIELDS_CHOICES
+from ..core.errors import StoreError
+from ..core.schema import FailureClass, parse_stage_range
+from ..execution.runner import RunOptions, RunSummary, run_shard
+from ..execution.shards import parse_shard
+from ..store.writer import FIELDS_CHOICES
 
 __all__ = ["cmd"]
 

@@ -9,8 +9,8 @@ from pathlib import Path
 
 import click
 
-from ..sweep.grid import load_run
-from ..sweep.slurm import (
+from ..config.manifest import load_run
+from ..execution.slurm import (
     SlurmError,
     SlurmOptions,
     SubmitError,

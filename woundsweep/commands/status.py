@@ -8,9 +8,10 @@ from typing import Any
 
 import click
 
-from ..schema import FailureClass
-from ..sweep.grid import load_run
-from ..sweep.results import scan_results, scan_store, summarize
+from ..config.manifest import load_run
+from ..core.schema import FailureClass
+from ..execution.summary import summarize
+from ..store.reader import scan_results, scan_store
 
 __all__ = ["cmd", "format_status"]
 

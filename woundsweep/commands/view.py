@@ -25,7 +25,7 @@ def cmd(run_dir: Path, job: int, out: Path) -> None:
     closure zone outlined, the largest von Mises marked, and the job's parameters and
     per-stage table. plotly.js is inlined (about 4.8 MB), so the file works offline.
     """
-    from ..fsutil import atomic_write
+    from ..core.fsutil import atomic_write
     from ..viz.jobdata import open_job
     from ..viz.view import view_page
 

@@ -10,7 +10,7 @@ from typing import Any, NamedTuple, Protocol
 
 import numpy as np
 
-__all__ = ["GPA_TO_KPA", "ContactModel", "ContactSummary", "add_csr", "structure"]
+__all__ = ["GPA_TO_KPA", "ContactModel", "ContactSummary"]
 
 GPA_TO_KPA = 1.0e6  # stiffness in GPa -> kPa
 
@@ -48,16 +48,12 @@ class ContactModel(Protocol):
         """Penalty energy (mN mm) at ``u``."""
         ...
 
-    def add_residual(self, b: Any, u: np.ndarray) -> None:
-        """Add the contact forces at ``u`` to an assembled PETSc vector."""
+    def force_vector(self, u: np.ndarray) -> np.ndarray:
+        """Contact forces (mN) at ``u`` as flat dofs."""
         ...
 
     def tangent_csr(self, u: np.ndarray) -> Any:
         """Contact tangent at ``u``, a scipy CSR matrix (grows the coupling pattern if needed)."""
-        ...
-
-    def add_jacobian(self, A: Any, u: np.ndarray) -> None:
-        """Add the contact tangent at ``u`` to an assembled PETSc matrix and re-finalise it."""
         ...
 
     def plan_pattern(self, u: np.ndarray) -> None:
@@ -88,42 +84,3 @@ class ContactModel(Protocol):
     def reset_timers(self) -> None:
         """Zero the time and search counters."""
         ...
-
-
-def add_csr(A: Any, K: Any, *, finalize: bool = True) -> None:
-    """Add the scipy CSR matrix ``K`` to the PETSc matrix ``A``; re-finalise it unless
-    ``finalize`` is False.
-
-    An entry outside the preallocated pattern is inserted (a malloc and a new nonzero state,
-    so MUMPS redoes its analysis), never refused: the contact terms couple nodes across the
-    wound that the finite-element pattern does not."""
-    from petsc4py import PETSc
-
-    A.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
-    A.setValuesCSR(
-        K.indptr.astype(PETSc.IntType),
-        K.indices.astype(PETSc.IntType),
-        K.data.astype(PETSc.ScalarType),
-        addv=PETSc.InsertMode.ADD_VALUES,
-    )
-    if finalize:
-        A.assemble()
-
-
-def structure(*mats: Any) -> Any:
-    """The union of the sparsity structures of scipy sparse matrices of one shape: a CSR
-    matrix of ones with sorted indices (explicit zeros count as entries)."""
-    import scipy.sparse
-
-    parts = []
-    for M in mats:
-        S = scipy.sparse.csr_matrix(M, copy=True)
-        S.data = np.ones(len(S.data), dtype=np.int32)  # positive: a sum cannot cancel an entry
-        parts.append(S)
-    out = parts[0]
-    for S in parts[1:]:
-        out = out + S
-    out = scipy.sparse.csr_matrix(out)
-    out.sum_duplicates()
-    out.data[:] = 1
-    return out

@@ -42,7 +42,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from .implicit import pair_terms
-from .protocol import ContactSummary, add_csr
+from .protocol import ContactSummary
 from .surfaces import lumped_area, surface
 
 __all__ = ["PATTERN_GAP", "PATTERN_MARGIN", "TWO_PASS_WEIGHT", "FlankContact"]
@@ -416,28 +416,6 @@ class FlankContact:
         M.sum_duplicates()
         self.assembly_time_s += time.perf_counter() - t0
         return M
-
-    def add_residual(self, b: Any, u: np.ndarray) -> None:
-        """Add the contact forces to an assembled PETSc residual vector ``b`` (serial)."""
-        if self.k_V_kPa <= 0.0:
-            return
-        f = self.force_vector(u)
-        arr = b.getArray()
-        arr += f[: len(arr)]
-
-    def add_jacobian(self, A: Any, u: np.ndarray) -> None:
-        """Add the contact tangent to an assembled PETSc matrix ``A`` and re-finalise it.
-
-        Couplings outside ``A``'s pattern are inserted (`add_csr`).
-        """
-        if self.k_V_kPa <= 0.0:
-            return
-        K = self.tangent_csr(u)
-        if K.nnz == 0:
-            return
-        t0 = time.perf_counter()
-        add_csr(A, K)
-        self.assembly_time_s += time.perf_counter() - t0
 
     @property
     def mult(self) -> np.ndarray | None:

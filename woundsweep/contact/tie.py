@@ -25,7 +25,6 @@ from typing import Any
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .protocol import add_csr
 from .surfaces import lumped_area, surface
 
 __all__ = ["ZoneTie"]
@@ -133,17 +132,6 @@ class ZoneTie:
         """Structure of the tangent (scipy CSR of ones, n_dofs square): fixed by the pairs."""
         K = self.tangent_csr(1.0)
         return type(K)((np.ones(K.nnz), K.indices, K.indptr), shape=K.shape)
-
-    def add_residual(self, b: Any, u: np.ndarray, k_V_kPa: float) -> None:
-        """Add the tie forces to an assembled PETSc vector ``b`` (serial)."""
-        if self.active and k_V_kPa > 0:
-            arr = b.getArray()
-            arr += self.force_vector(u, k_V_kPa)[: len(arr)]
-
-    def add_jacobian(self, A: Any, k_V_kPa: float) -> None:
-        """Add the tie tangent to an assembled PETSc matrix ``A`` and re-finalise it."""
-        if self.active and k_V_kPa > 0:
-            add_csr(A, self.tangent_csr(k_V_kPa))
 
     def force_mN(self, u: np.ndarray, k_V_kPa: float) -> float:
         """Total tangential tie force, sum over pairs of |c_p s_p| (mN)."""

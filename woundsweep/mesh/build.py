@@ -5,7 +5,7 @@ fragment, and the closure zone's border lines are imprinted on the wound face, s
 union of whole facets, tagged WOUND_ZONE) under the size law of `woundsweep.mesh.sizing`, and the quarter is mirrored about
 x = w/2 and y = 0 in numpy. The mesh is therefore exactly mirror-symmetric, which the closure
 boundary condition at x = w/2 relies on, and it costs a quarter of a full build. Cell and
-facet tags are those of `woundsweep.schema`.
+facet tags are those of `woundsweep.core.schema`.
 """
 
 from __future__ import annotations
@@ -20,8 +20,9 @@ from typing import Any, NamedTuple
 import gmsh
 import numpy as np
 
-from ..errors import GeometryError
-from ..schema import (
+from ..config.geometry import GeometrySpec
+from ..core.errors import GeometryError
+from ..core.schema import (
     BOTTOM,
     DERMIS,
     SUBCUTIS,
@@ -34,7 +35,6 @@ from ..schema import (
     Y_MIN,
 )
 from .sizing import MESH_LAW_VERSION, SIZE_LAW, _size_scale, _wound_size, mesh_size_mm
-from .spec import GeometrySpec
 
 __all__ = ["MeshData", "build_mesh"]
 

@@ -18,15 +18,14 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from ..errors import StoreError
-from ..fsutil import atomic_write
-from ..schema import CELL_TAGS, FACET_TAGS
+from ..config.geometry import GeometrySpec
+from ..core.errors import StoreError
+from ..core.fsutil import atomic_write
+from ..core.schema import CELL_TAGS, FACET_TAGS
+from ..core.versions import MESH_CACHE_FORMAT, MESH_LAW_VERSION
 from .build import MeshData, build_mesh
-from .sizing import MESH_LAW_VERSION
-from .spec import GeometrySpec
 
 __all__ = [
-    "CACHE_FORMAT",
     "CachedMesh",
     "get_mesh",
     "load_mesh",
@@ -35,7 +34,6 @@ __all__ = [
     "save_mesh",
 ]
 
-CACHE_FORMAT = 1
 _ID = re.compile(r"^[0-9a-f]{16}$")
 # name -> (dtype, trailing shape)
 _ARRAYS: dict[str, tuple[np.dtype, tuple[int, ...]]] = {
@@ -76,7 +74,7 @@ def mesh_checksum(mesh: MeshData) -> str:
 def save_mesh(path: str | Path, mesh: MeshData, spec: GeometrySpec, geometry_id: str) -> None:
     """Write ``mesh`` atomically with its spec, law version and checksum."""
     meta = {
-        "format": CACHE_FORMAT,
+        "format": MESH_CACHE_FORMAT,
         "mesh_law_version": MESH_LAW_VERSION,
         "geometry_id": geometry_id,
         "spec": spec.to_dict(),
@@ -123,7 +121,7 @@ def _check(
     geometry_id: str | None,
 ) -> str:
     """The first reason the cached arrays cannot be used, or ''."""
-    if not isinstance(meta, dict) or meta.get("format") != CACHE_FORMAT:
+    if not isinstance(meta, dict) or meta.get("format") != MESH_CACHE_FORMAT:
         return "unknown cache format"
     if meta.get("mesh_law_version") != MESH_LAW_VERSION:
         return f"built with mesh law {meta.get('mesh_law_version')}, now {MESH_LAW_VERSION}"

@@ -31,14 +31,11 @@ from __future__ import annotations
 from collections.abc import Mapping
 from types import MappingProxyType
 
-from .spec import GeometrySpec, wound_distance_mm
+from ..config.geometry import GeometrySpec, wound_distance_mm
+from ..core.versions import MESH_LAW_VERSION
 
 __all__ = ["MESH_LAW_VERSION", "PAPER_CELL_CAP", "SIZE_LAW", "mesh_size_mm"]
 
-# Bumped whenever the geometry or the size law changes (2: the closure zone is imprinted on
-# the wound surface; 3: edges scale with the element degree): cached meshes of another
-# version are rebuilt.
-MESH_LAW_VERSION = 3
 # The paper omitted models above 40,000 (P1) cells; the size law keeps every paper geometry
 # below, and a P2 mesh of the same geometry has fewer cells for about as many nodes.
 PAPER_CELL_CAP = 40_000

@@ -1,14 +1,14 @@
 """Nonlinear solution algorithms, apart from any model: Newton and load continuation.
 
-`NewtonSettings` (`woundsweep.solver.settings`) is pure Python; the solvers need petsc4py
+`NewtonSettings` (`woundsweep.config.solver`) is pure Python; the solvers need petsc4py
 and are loaded on first use. The function `continuation` is imported from its module,
 `woundsweep.solver.continuation`.
 """
 
 from __future__ import annotations
 
-from ..lazy import lazy_exports
-from .settings import NewtonSettings
+from ..config.solver import NewtonSettings
+from ..core.lazy import lazy_exports
 
 __all__ = [
     "ContinuationResult",

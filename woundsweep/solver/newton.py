@@ -10,11 +10,9 @@ Under ``Policy.residual_rule`` = False (the contact stages) the residual may gro
 step of the semi-smooth contact Newton overshoots penalty forces it corrects at the next step,
 so only inversion and the strain limit shrink gamma there.
 
-A problem may carry variables beside u that Newton updates with each step: an attribute
-``multipliers`` (`woundsweep.contact.ContactMultipliers`, the contact stages' semi-smooth
-step) with ``reset()`` (start of a stage), ``begin()`` (start of a solve), ``predict(du)`` (at
-the current state, for u += gamma du), ``accept(prediction, gamma)``, ``snapshot()`` /
-``restore(saved)`` (a rejected relaxation) and ``commit()`` (a converged solve).
+A problem may carry variables beside u that Newton updates with each step: its
+``multipliers`` (a `Multipliers`, e.g. `woundsweep.contact.ContactMultipliers`, the contact
+stages' semi-smooth step), or None.
 
 Dirichlet conditions are imposed strongly by row elimination on flat dof indices: the
 constrained rows of J become identity rows and the right-hand side holds ``g - u`` there, so
@@ -33,7 +31,7 @@ of a load ramp, whose state is not a result) a solve ends once
 ``||R_free||_2 <= atol + path_rtol * f_scale`` with the Dirichlet values met, without the
 full-step test.
 
-Statuses (`woundsweep.schema.StageStatus`): converged, max-iterations (the step budget, or a
+Statuses (`woundsweep.core.schema.StageStatus`): converged, max-iterations (the step budget, or a
 2-cycle: ``CYCLE_REPEATS`` updates in a row back on the state two updates before), diverged
 (non-finite or exploding residual, or no acceptable relaxation), inverted (every relaxation
 inverts an element), linear-solver-failed (factorisation error or non-finite solution).
@@ -44,15 +42,15 @@ from __future__ import annotations
 import logging
 import math
 import time
-from typing import NamedTuple, Protocol
+from typing import Any, NamedTuple, Protocol
 
 import numpy as np
 from petsc4py import PETSc
 
-from ..schema import StageStatus
-from .settings import NewtonSettings
+from ..config.solver import NewtonSettings
+from ..core.schema import StageStatus
 
-__all__ = ["NewtonResult", "NewtonSolver", "NonlinearProblem", "Policy"]
+__all__ = ["Multipliers", "NewtonResult", "NewtonSolver", "NonlinearProblem", "Policy"]
 
 _log = logging.getLogger(__name__)
 LINEAR_RTOL = 1e-6  # accepted relative residual of a direct solve
@@ -87,8 +85,70 @@ class Policy(NamedTuple):
         return cls(settings, fixed_scale=True, symmetric=True, residual_rule=False)
 
 
+class Multipliers(Protocol):
+    """Variables a problem carries beside u, updated by Newton with each step."""
+
+    def reset(self) -> None:
+        """Start of a stage: forget every earlier solve."""
+        ...
+
+    def begin(self) -> None:
+        """Start of a solve."""
+        ...
+
+    def predict(self, du: np.ndarray) -> Any:
+        """At the current state, what u += gamma du would make of them (for `accept`)."""
+        ...
+
+    def accept(self, prediction: Any, gamma: float) -> None:
+        """Take the update u += gamma du that ``prediction`` was made for."""
+        ...
+
+    def snapshot(self) -> Any:
+        """Their current values (to `restore` after a rejected relaxation)."""
+        ...
+
+    def restore(self, saved: Any) -> None:
+        """Return to a `snapshot`."""
+        ...
+
+    def commit(self) -> None:
+        """A solve converged."""
+        ...
+
+
+class _NoMultipliers:
+    """The `Multipliers` of a problem that carries none."""
+
+    def reset(self) -> None:
+        pass
+
+    def begin(self) -> None:
+        pass
+
+    def predict(self, du: np.ndarray) -> None:
+        return None
+
+    def accept(self, prediction: Any, gamma: float) -> None:
+        pass
+
+    def snapshot(self) -> None:
+        return None
+
+    def restore(self, saved: Any) -> None:
+        pass
+
+    def commit(self) -> None:
+        pass
+
+
+_NONE = _NoMultipliers()
+
+
 class NonlinearProblem(Protocol):
     """What Newton needs from a discretised problem (all arrays in dof order, flat)."""
+
+    multipliers: Multipliers | None  # variables carried beside u, if any
 
     def solution(self) -> np.ndarray:
         """Writable view of the current displacement dofs."""
@@ -167,12 +227,12 @@ class NewtonSolver:
         multipliers): its result must not depend on what the solver did before it (earlier
         stages, or other jobs on a reused model)."""
         self.gamma = 1.0
-        self._hook("reset")
+        self.multipliers.reset()
 
-    def _hook(self, name: str, *args: object) -> object:
-        """Call method ``name`` of the problem's carried multipliers, if it has any."""
-        m = getattr(self.problem, "multipliers", None)
-        return getattr(m, name)(*args) if m is not None else None
+    @property
+    def multipliers(self) -> Multipliers:
+        """The problem's carried multipliers (no-ops for a problem without them)."""
+        return self.problem.multipliers or _NONE
 
     # -- pieces ---------------------------------------------------------------------------
 
@@ -264,7 +324,7 @@ class NewtonSolver:
         free[rows] = False
         t_asm = t_fac = t_sol = t_res = 0.0
 
-        self._hook("begin")
+        self.multipliers.begin()
         r, dt = self._residual(offset)
         t_res += dt
         last_inc = math.inf
@@ -301,7 +361,7 @@ class NewtonSolver:
             at_end = res_ok and full and last_inc <= st.stol * ell
             on_path = self._policy.path and res_norm <= st.atol + st.path_rtol * scale
             if bc_ok and (at_end or on_path):
-                self._hook("commit")
+                self.multipliers.commit()
                 return result(CONVERGED)
             if res_norm > st.divergence_factor * max(scale, st.atol):
                 return result(DIVERGED)
@@ -324,11 +384,11 @@ class NewtonSolver:
             if res_ok and bc_ok and du is not None:
                 # The convergence check: a full, undamped Newton step from a state that meets
                 # the tolerances must meet them again and be smaller than stol.
-                pred = self._hook("predict", du)
+                pred = self.multipliers.predict(du)
                 u += du
                 min_det = self.problem.min_det(u)
                 if min_det > 0:
-                    self._hook("accept", pred, 1.0)
+                    self.multipliers.accept(pred, 1.0)
                     r, dt = self._residual(offset)
                     t_res += dt
                     last_inc = float(np.max(np.abs(du), initial=0.0))
@@ -353,7 +413,7 @@ class NewtonSolver:
 
     def _cycle_state(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
         """What the next step depends on: u and the carried multipliers."""
-        m = self._hook("snapshot")
+        m = self.multipliers.snapshot()
         return u.copy(), None if m is None else np.asarray(m)
 
     def _returned(self, back: tuple[np.ndarray, np.ndarray | None], size: float) -> bool:
@@ -362,7 +422,7 @@ class NewtonSolver:
         u = self.problem.solution()
         if float(np.max(np.abs(u - back[0]), initial=0.0)) > CYCLE_RTOL * size:
             return False
-        m, m_back = self._hook("snapshot"), back[1]
+        m, m_back = self.multipliers.snapshot(), back[1]
         if m is None or m_back is None:
             return m is None and m_back is None
         m = np.asarray(m)
@@ -385,7 +445,7 @@ class NewtonSolver:
         through them)."""
         st = self._policy.settings
         u = self.problem.solution()
-        pred = self._hook("predict", du)
+        pred = self.multipliers.predict(du)
         strain = self.problem.max_strain(du)
         gamma = min(self.gamma, st.max_strain_step / strain) if strain > 0 else self.gamma
         shrunk = gamma < self.gamma
@@ -395,14 +455,14 @@ class NewtonSolver:
             u[:] = u0 + gamma * du
             det = self.problem.min_det(u)
             if det > 0:
-                saved = self._hook("snapshot")
-                self._hook("accept", pred, gamma)
+                saved = self.multipliers.snapshot()
+                self.multipliers.accept(pred, gamma)
                 r_try, dt = self._residual(offset)
                 t_res += dt
                 n_try = float(np.linalg.norm(np.where(free, r_try, 0.0)))
                 if np.all(np.isfinite(r_try)) and (not check or n_try <= limit):
                     return _Step(gamma, shrunk, r_try, det, t_res)
-                self._hook("restore", saved)
+                self.multipliers.restore(saved)
                 why = DIVERGED
             else:
                 why = INVERTED

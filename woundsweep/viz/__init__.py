@@ -9,7 +9,7 @@ re-exported lazily.
 
 from __future__ import annotations
 
-from ..lazy import lazy_exports
+from ..core.lazy import lazy_exports
 
 __all__ = [
     "AtlasSummary",

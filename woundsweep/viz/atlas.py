@@ -28,9 +28,9 @@ from typing import Any, NamedTuple
 import numpy as np
 import pandas as pd
 
-from ..errors import StoreError
-from ..schema import STAGES, StageStatus
-from ..sweep.grid import GEOMETRY_KEYS
+from ..config.sweep import GEOMETRY_KEYS
+from ..core.errors import StoreError
+from ..core.schema import STAGES, StageStatus
 from .html import asset, fmt, json_script, page, plotly_js
 from .jobdata import load_job
 from .view import job_body

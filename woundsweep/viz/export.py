@@ -23,8 +23,8 @@ from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
-from ..fsutil import atomic_write
-from ..schema import CELL_TAGS, FACET_TAGS, STAGE_NAMES, UNITS
+from ..core.fsutil import atomic_write
+from ..core.schema import CELL_TAGS, FACET_TAGS, STAGE_NAMES, UNITS
 from .jobdata import JobFields
 
 __all__ = ["export_job", "job_dir_name"]

@@ -17,12 +17,12 @@ from typing import Any, NamedTuple
 import numpy as np
 import pandas as pd
 
-from ..errors import StoreError
-from ..schema import StageStatus
-from ..solverfile import MESH_GROUP, STAGE_DATASETS, stage_group
+from ..core.errors import StoreError
+from ..core.schema import StageStatus
+from ..store.solverfile import MESH_GROUP, STAGE_DATASETS, stage_group
 from .surface import closure_zone_facets
 
-__all__ = ["JobFields", "StageNote", "job_row", "load_job", "open_job", "records", "stage_notes"]
+__all__ = ["JobFields", "StageNote", "load_job", "open_job", "records", "stage_notes"]
 
 
 class StageNote(NamedTuple):
@@ -47,14 +47,6 @@ class JobFields(NamedTuple):
     zone: np.ndarray  # (k,) bool: the facet is in the closure zone
     fields: dict[int, tuple[np.ndarray, np.ndarray]]  # stage -> (displacement_mm, von_mises_kPa)
     notes: list[StageNote]
-
-
-def job_row(manifest: pd.DataFrame, job_index: int) -> dict[str, Any]:
-    """The manifest row of ``job_index`` as a dict (StoreError if the run has no such job)."""
-    hit = manifest[manifest["job_index"] == job_index]
-    if hit.empty:
-        raise StoreError(f"no job {job_index} (the run has jobs 0-{len(manifest) - 1})")
-    return {k: (v.item() if isinstance(v, np.generic) else v) for k, v in hit.iloc[0].items()}
 
 
 def records(rows: pd.DataFrame | list[dict[str, Any]]) -> list[dict[str, Any]]:
@@ -122,9 +114,8 @@ def _mesh_arrays(run: Any, job: dict[str, Any], groups: dict[str, Any], mesh_fil
 
 def _cached_mesh(run: Any, job: dict[str, Any]) -> Any:
     from ..mesh.cache import get_mesh
-    from ..model.job import job_spec
 
-    return get_mesh(run.run_dir, str(job["geometry_id"]), job_spec(run, job))
+    return get_mesh(run.run_dir, str(job["geometry_id"]), run.geometry(job))
 
 
 def _boundary(run: Any, job: dict[str, Any], points: np.ndarray, cells: np.ndarray):
@@ -205,10 +196,10 @@ def load_job(
 
 def open_job(run_dir: str | Path, job_index: int, cache: dict[Any, Any] | None = None) -> JobFields:
     """`load_job` for one job of a run directory, with its validated rows."""
-    from ..sweep.grid import load_run
-    from ..sweep.results import read_results
+    from ..config.manifest import load_run
+    from ..store.reader import read_results
 
     run = load_run(run_dir)
-    job = job_row(run.manifest, job_index)
+    job = run.job(job_index)
     rows = read_results(run.run_dir, [str(job["job_id"])])
     return load_job(run, job, rows, cache)

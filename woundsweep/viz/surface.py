@@ -1,7 +1,7 @@
 """Mesh geometry the viewers need, in numpy: the closure zone's facets, the exterior surface
 with its cellwise stress, the zone's outline and the deformed location of the maximum.
 
-The closure zone is the mesh's own facet tag (`woundsweep.schema.WOUND_ZONE`), the facets the
+The closure zone is the mesh's own facet tag (`woundsweep.core.schema.WOUND_ZONE`), the facets the
 solver's `WoundDomain` uses (a fem test compares them), so the viewers need no DOLFINx.
 """
 
@@ -12,7 +12,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ..contact.geometry import owning_cells
-from ..schema import WOUND_ZONE
+from ..core.schema import WOUND_ZONE
 
 __all__ = ["Surface", "closure_zone_facets", "max_cell_point", "surface_of", "zone_outline"]
 

@@ -16,8 +16,8 @@ from typing import Any
 
 import numpy as np
 
-from ..schema import STAGE_NAMES
-from ..sweep.grid import MANIFEST_COLUMNS
+from ..config.sweep import MANIFEST_COLUMNS
+from ..core.schema import STAGE_NAMES
 from .html import JOB_COLUMNS, STAGE_COLUMNS, asset, json_script, page, plotly_js, table
 from .jobdata import JobFields, StageNote, records
 from .surface import max_cell_point, surface_of, zone_outline

@@ -1,0 +1,174 @@
+"""The manifest (a sweep expanded into one row per job) and the run directory that holds it.
+
+`expand` turns a `Sweep` into the manifest's rows in a stable geometry-major order; job and
+geometry ids are content hashes of the parameters. `load_run` opens a run directory made by
+``woundsweep generate``; `Run.job` and `Run.geometry` give one job's manifest row and mesh
+parameters.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import itertools
+import json
+import math
+from pathlib import Path
+from typing import Any, NamedTuple
+
+import numpy as np
+import pandas as pd
+
+from ..core.errors import GeometryError, StoreError, SweepError
+from .geometry import GeometrySpec
+from .rules import compile_rule, evaluate_rule
+from .sweep import (
+    GEOMETRY_KEYS,
+    GRID_AXES,
+    MANIFEST_COLUMNS,
+    MAX_JOBS,
+    RULE_NAMES,
+    SHAPE_AXES,
+    Sweep,
+    is_number,
+    load_sweep,
+)
+
+__all__ = ["Run", "canonical_hash", "count_jobs", "expand", "load_run"]
+
+
+def canonical_hash(params: dict[str, Any]) -> str:
+    """16 hex chars of sha256 over the sorted, type-normalised parameters (floats as repr)."""
+    norm = {
+        k: (float(v) if is_number(v) else v)
+        for k, v in params.items()
+        if not (isinstance(v, float) and math.isnan(v))
+    }
+    blob = json.dumps(norm, sort_keys=True, separators=(",", ":"))
+    return hashlib.sha256(blob.encode()).hexdigest()[:16]
+
+
+def _derive(df: pd.DataFrame) -> pd.DataFrame:
+    td = df["dermal_thickness_mm"]
+    df["subcutis_thickness_mm"] = df["subcutis_thickness_factor"] * td
+    df["total_thickness_mm"] = td + df["subcutis_thickness_mm"]
+    df["patch_half_length_mm"] = df["patch_size_factor"] * df["total_thickness_mm"]
+    w = df["wound_width_factor"] * df["patch_half_length_mm"]
+    df["wound_width_mm"] = w
+    a = df["wound_aspect_factor"]
+    # Cylinder axis a*w above the surface, radius through the surface edges at x = 0 and w.
+    cyl_depth = np.sqrt((w / 2) ** 2 + (a * w) ** 2) - a * w
+    wedge_depth = df["wound_depth_factor"] * df["total_thickness_mm"]
+    df["wound_depth_mm"] = np.where(df["wound_shape"] == "cylindrical", cyl_depth, wedge_depth)
+    return df
+
+
+def count_jobs(sweep: Sweep) -> int:
+    """The jobs of the grid before exclusions (computed without expanding it)."""
+    common = math.prod(len(sweep.grid[k]) for k in GRID_AXES)
+    return sum(common * len(sweep.shapes[s][SHAPE_AXES[s]]) for s in sweep.shapes)
+
+
+def _check_geometries(sweep: Sweep, df: pd.DataFrame) -> None:
+    """Every geometry must be buildable (`GeometrySpec`), so no job fails on its ranges later."""
+    for row in df.drop_duplicates(list(GEOMETRY_KEYS)).to_dict("records"):
+        try:
+            GeometrySpec.from_row(row)
+        except GeometryError as err:
+            where = ", ".join(
+                f"{k}={row[k]:g}" if isinstance(row[k], float) else f"{k}={row[k]}"
+                for k in GEOMETRY_KEYS
+                if not (isinstance(row[k], float) and math.isnan(row[k]))
+            )
+            raise SweepError(sweep.path, "grid", f"geometry {where}: {err}") from None
+
+
+def expand(sweep: Sweep, max_jobs: int = MAX_JOBS) -> pd.DataFrame:
+    """Expand a sweep into the manifest (one row per job, geometry-major stable order).
+
+    A grid of more than ``max_jobs`` jobs (before exclusions) is refused before expansion.
+    """
+    total = count_jobs(sweep)
+    if total > max_jobs:
+        raise SweepError(
+            sweep.path,
+            "grid",
+            f"the grid has {total} jobs before exclusions, above the limit of {max_jobs} "
+            "(generate --max-jobs raises it)",
+        )
+    rows = []
+    for shape in sorted(sweep.shapes):
+        axis = SHAPE_AXES[shape]
+        axes = [sweep.grid[k] for k in GRID_AXES[:5]] + [sweep.shapes[shape][axis]]
+        axes += [sweep.grid["skin_type"], sweep.grid["orientation_deg"]]
+        names = [*GRID_AXES[:5], axis, "skin_type", "orientation_deg"]
+        for values in itertools.product(*axes):
+            row = dict(zip(names, values))
+            row["wound_shape"] = shape
+            rows.append(row)
+    df = pd.DataFrame(rows)
+    for axis in SHAPE_AXES.values():
+        if axis not in df:
+            df[axis] = np.nan
+    df = _derive(df)
+    keep = np.ones(len(df), dtype=bool)
+    for i, rule in enumerate(sweep.exclude):
+        tree = compile_rule(sweep.path, f"exclude[{i}]", rule, RULE_NAMES)
+        with np.errstate(all="ignore"):  # x / 0 is inf, as in NumPy; no warning on stderr
+            hit = evaluate_rule(tree, df)
+        keep &= ~np.broadcast_to(np.asarray(hit, dtype=bool), keep.shape)
+    df = df[keep].reset_index(drop=True)
+    if df.empty:
+        raise SweepError(sweep.path, "exclude", "the grid expands to zero jobs")
+    _check_geometries(sweep, df)
+    job_keys = [*GEOMETRY_KEYS, "skin_type", "orientation_deg"]
+    records = df[job_keys].to_dict("records")
+    df["job_id"] = [canonical_hash(r) for r in records]
+    # One hash per geometry, not per job (the skin type x orientation jobs share it).
+    codes = df.groupby(list(GEOMETRY_KEYS), dropna=False, sort=False).ngroup().to_numpy()
+    first = pd.Series(np.arange(len(df))).groupby(codes).first().to_numpy()
+    gids = np.array([canonical_hash({k: records[i][k] for k in GEOMETRY_KEYS}) for i in first])
+    df["geometry_id"] = gids[codes]
+    df["job_index"] = np.arange(len(df), dtype=np.int64)
+    if df["job_id"].duplicated().any():
+        raise SweepError(sweep.path, "grid", "duplicate jobs (two axis values give the same job)")
+    return df[list(MANIFEST_COLUMNS)]
+
+
+class Run(NamedTuple):
+    """A run directory made by ``woundsweep generate``: its sweep and its manifest."""
+
+    run_dir: Path
+    sweep: Sweep
+    manifest: pd.DataFrame
+
+    def job(self, job_index: int) -> dict[str, Any]:
+        """The manifest row of ``job_index`` as a dict of plain values (StoreError if none)."""
+        hit = self.manifest[self.manifest["job_index"] == int(job_index)]
+        if hit.empty:
+            raise StoreError(f"no job {job_index} (the run has jobs 0-{len(self.manifest) - 1})")
+        return {k: (v.item() if isinstance(v, np.generic) else v) for k, v in hit.iloc[0].items()}
+
+    def geometry(self, row: Any) -> GeometrySpec:
+        """The `GeometrySpec` of a manifest row with the sweep's closure zone and element
+        degree (both part of the mesh); GeometryError names the job."""
+        return GeometrySpec.from_row(
+            row, self.sweep.stages.closure_zone, self.sweep.solver.element_degree
+        )
+
+
+def load_run(run_dir: str | Path) -> Run:
+    """Open a run directory: its sweep copy and its manifest."""
+    rd = Path(run_dir)
+    manifest_path, sweep_path = rd / "manifest.parquet", rd / "sweep.yaml"
+    if not manifest_path.is_file() or not sweep_path.is_file():
+        raise StoreError(
+            f"{rd}: not a run directory (run `woundsweep generate SWEEP.yaml --out {rd}`)"
+        )
+    try:
+        manifest = pd.read_parquet(manifest_path)
+    except Exception as err:  # pyarrow raises several types for damaged files
+        raise StoreError(f"{manifest_path}: unreadable manifest ({type(err).__name__})") from None
+    missing = [c for c in MANIFEST_COLUMNS if c not in manifest.columns]
+    if missing:
+        raise StoreError(f"{manifest_path}: missing columns {missing}")
+    return Run(rd, load_sweep(sweep_path), manifest)

@@ -1,0 +1,30 @@
+"""Format and law versions: each stored artefact records the version it was made with, and a
+reader treats another version as stale (recomputed), never as valid."""
+
+from __future__ import annotations
+
+__all__ = [
+    "FAILURE_FORMAT",
+    "MESH_CACHE_FORMAT",
+    "MESH_LAW_VERSION",
+    "MODEL_FORMAT",
+    "RESULT_FORMAT_VERSION",
+    "STATISTICS_VERSION",
+    "SURROGATE_FORMAT",
+]
+
+# The result file's footer and fingerprint layout (`woundsweep.store.identity`).
+RESULT_FORMAT_VERSION = 2
+# The geometry and the mesh size law (`woundsweep.mesh.sizing`, the closure zone imprinted on
+# the wound surface, edges scaled with the element degree). Cached meshes and results of
+# another version are rebuilt.
+MESH_LAW_VERSION = 3
+# How the stored stress statistics are computed (docs/model.md, "Stress statistics": P2
+# cells sampled at a degree-4 rule's points). Part of a result's fingerprint.
+STATISTICS_VERSION = 2
+# The per-run mesh cache's file layout (`woundsweep.mesh.cache`).
+MESH_CACHE_FORMAT = 1
+# The trained models' metadata (`woundsweep.analysis`).
+MODEL_FORMAT = "woundsweep-quantile-model/1"
+SURROGATE_FORMAT = "woundsweep-stress-surrogate/1"
+FAILURE_FORMAT = "woundsweep-failure-model/1"

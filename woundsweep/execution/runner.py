@@ -1,0 +1,351 @@
+"""`woundsweep run`: every job in its own process, with a timeout, a memory cap and retries.
+
+One runner process drives a shard. It keeps up to K jobs running, each as
+``woundsweep solve RUN_DIR --job N --stages A-B --out TMP.h5`` in its own process group,
+forked by the runner's fork server (`woundsweep.execution.forkserver`, `woundsweep.execution.process`),
+and polls them from a single thread (no threads: ``preexec_fn`` is only safe without them).
+A job is killed with its whole process group when it exceeds the wall-clock timeout or the
+memory cap. The cap is enforced two ways: the
+resident set of the job's process tree is polled and the group killed above ``--max-memory``
+(so the runner knows it was memory and says so); ``RLIMIT_AS`` is set at twice the cap plus
+1 GiB as a backstop against allocations faster than the poll (address space runs well above
+RSS: importing DOLFINx alone maps ~0.5 GB). An ended attempt gets its failure class from
+`woundsweep.execution.classify`; the transient ones are retried (``--retries``).
+
+Warm-up: FFCx compiles each form once per machine (~50 s for the Fung Jacobian) and processes
+that need a form being compiled wait on its lock for only 10 s (`woundsweep.execution.jitlock`).
+So the runner starts with one job alone (the cheapest of the shard) and fans out to K workers
+once a job has been through the solver (converged or not), or after three tries. Jobs started
+while the cache may still be cold get ``warmup_extra_s`` more time.
+"""
+
+from __future__ import annotations
+
+import errno
+import os
+import signal
+import socket
+import sys
+import time
+from collections import deque
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, NamedTuple
+
+import pandas as pd
+
+from ..config.manifest import load_run
+from ..core.errors import StoreError, WoundsweepError
+from ..core.faults import ATTEMPT_ENV
+from ..core.schema import FailureClass
+from ..store.writer import JobOutcome, Store
+from .classify import TRANSIENT_CLASSES, classify
+from .forkserver import ForkServer, JobRequest
+from .jitlock import break_lock, clear_stale_jit_locks, jit_cache_dir, lock_state
+from .process import Attempt, Job, kill_group, tree_rss
+from .shards import Shard, estimate_cost, shard_jobs
+
+__all__ = ["RunOptions", "RunSummary", "Terminated", "run_shard"]
+
+WARMUP_MAX_JOBS = 3
+
+
+@dataclass(frozen=True)
+class RunOptions:
+    """Settings of one ``woundsweep run``."""
+
+    shard: Shard = Shard(0, 1)
+    workers: int = 1
+    timeout_s: float = 1800.0
+    max_memory_bytes: int | None = None
+    retries: int = 2
+    rerun_failed: bool = False
+    stages: tuple[int, int] = (1, 6)
+    fields: str = "final"
+    warmup: bool = True
+    warmup_extra_s: float = 900.0
+    jit_stale_after_s: float = 600.0
+    progress: bool | None = None  # None: only on a terminal
+    poll_s: float = 0.05
+
+
+class RunSummary(NamedTuple):
+    """What one ``run_shard`` did."""
+
+    jobs: int
+    skipped: int
+    ran: int
+    by_class: dict[str, int]
+    attempts: int
+    wall_time_s: float
+
+
+class _Runner:
+    def __init__(self, run_dir: Path, opts: RunOptions) -> None:
+        self.run_dir = run_dir
+        self.opts = opts
+        self.store = Store(run_dir)
+        self.running: dict[int, Attempt] = {}
+        self.by_class: dict[str, int] = {}
+        self.attempts = 0
+        self.warming = opts.warmup
+        self.warmup_tries = 0
+        self.cache_dir = jit_cache_dir()
+        self.host = socket.gethostname()
+        self.env = dict(os.environ)
+        self.env["PYTHONUNBUFFERED"] = "1"
+        self.env["PYTHONFAULTHANDLER"] = "1"  # a segfault leaves a Python traceback in the log
+        if opts.workers > 1:  # K processes on K cores: threads inside each would oversubscribe
+            for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+                self.env[var] = "1"
+        self.server = ForkServer(self.env, str(run_dir))  # forks the attempts' processes
+
+    # -- starting ------------------------------------------------------------------------
+    def start(self, job: Job) -> None:
+        job.attempts += 1
+        self.attempts += 1
+        out = self.store.tmp_path(job.job_id, job.attempts)
+        log = self.store.log_path(job.job_id)
+        a, b = self.opts.stages
+        request = JobRequest(str(self.run_dir), int(job.index), (a, b), str(out))
+        cmd = request.command()
+        env = dict(self.env)
+        env[ATTEMPT_ENV] = str(job.attempts)
+        limit = self.opts.timeout_s + (self.opts.warmup_extra_s if self.warming else 0.0)
+        with open(log, "ab") as fh:
+            offset = fh.tell()
+            stamp = time.strftime("%Y-%m-%dT%H:%M:%S%z")
+            fh.write(
+                f"=== woundsweep run: job {job.index} ({job.job_id}) attempt {job.attempts} "
+                f"on {self.host} at {stamp}, shard {self.opts.shard}, timeout {limit:.0f} s\n"
+                f"=== {' '.join(cmd)}\n".encode()
+            )
+            fh.flush()
+            as_limit = None
+            if self.opts.max_memory_bytes is not None:
+                as_limit = 2 * self.opts.max_memory_bytes + 2**30
+        proc = self.server.spawn(request, env, log, as_limit)
+        now = time.time()
+        self.running[proc.pid] = Attempt(job, proc, out, offset, now, now + limit)
+
+    # -- polling -------------------------------------------------------------------------
+    def poll(self) -> list[tuple[Attempt, int, Any]]:
+        """Reap finished attempts; kill those over time or memory. Returns the finished ones."""
+        done = []
+        now = time.time()
+        for pid, att in list(self.running.items()):
+            try:
+                wpid, status, usage = self.server.wait4(pid)
+            except ChildProcessError:
+                wpid, status, usage = pid, 0, None
+            if wpid == pid:
+                att.proc.returncode = status  # reaped here; keep Popen from waiting again
+                kill_group(pid)  # strays left in the group
+                del self.running[pid]
+                done.append((att, status, usage))
+                continue
+            if att.killed_for:
+                continue
+            if now > att.deadline:
+                att.killed_for = "timeout"
+                kill_group(pid)
+                continue
+            if self.opts.max_memory_bytes is not None:
+                rss = tree_rss(pid)
+                att.max_rss = max(att.max_rss, rss)
+                if rss > self.opts.max_memory_bytes:
+                    att.killed_for = "memory"
+                    kill_group(pid)
+        return done
+
+    def kill_all(self) -> None:
+        for pid, att in list(self.running.items()):
+            kill_group(pid)
+            self.server.wait(pid)
+            att.proc.returncode = -9
+            att.out.unlink(missing_ok=True)
+        self.running.clear()
+
+    # -- finishing -----------------------------------------------------------------------
+    def finish(self, att: Attempt, status: int, usage: Any) -> JobOutcome | None:
+        """Classify; returns the outcome to store, or None when the job is retried."""
+        job = att.job
+        end = time.time()
+        wall = end - att.started
+        cpu = (usage.ru_utime + usage.ru_stime) if usage is not None else 0.0
+        job.total_wall_s += wall
+        job.total_cpu_s += cpu
+        if usage is not None:
+            att.max_rss = max(att.max_rss, usage.ru_maxrss * 1024)  # ru_maxrss is in KiB
+        log = self.store.log_path(job.job_id)
+        cls = classify(att, status, self.opts.stages, self.opts.max_memory_bytes, log)
+        with open(log, "ab") as fh:
+            fh.write(
+                f"=== attempt {job.attempts} ended: {cls.failure_class}"
+                f"{': ' + cls.detail if cls.detail else ''} ({wall:.1f} s wall, {cpu:.1f} s cpu)\n".encode()
+            )
+        if self.warming:
+            self.warmup_tries += 1
+            if (
+                cls.failure_class in (FailureClass.CONVERGED, FailureClass.NOT_CONVERGED)
+                or self.warmup_tries >= WARMUP_MAX_JOBS
+            ):
+                self.warming = False
+        if cls.failure_class in TRANSIENT_CLASSES and job.attempts <= self.opts.retries:
+            att.out.unlink(missing_ok=True)
+            job.wait_for_lock = att.extra.get("jit_lock")
+            return None
+        code = os.WEXITSTATUS(status) if os.WIFEXITED(status) and not att.killed_for else None
+        return JobOutcome(
+            failure_class=cls.failure_class,
+            failure_detail=cls.detail,
+            exit_code=code,
+            attempts=job.attempts,
+            wall_time_s=wall,
+            cpu_time_s=cpu,
+            total_wall_time_s=job.total_wall_s,
+            total_cpu_time_s=job.total_cpu_s,
+            max_rss_MiB=att.max_rss / 2**20 if att.max_rss else None,
+            started_at=att.started,
+            finished_at=end,
+            output=cls.output,
+        )
+
+    def ready(self, job: Job) -> bool:
+        """A job retried after a JIT-lock timeout waits until that lock is released or stale."""
+        lock = job.wait_for_lock
+        if lock is None:
+            return True
+        if time.time() < job.next_lock_check:
+            return False
+        job.next_lock_check = time.time() + 2.0  # the check scans /proc: not every poll
+        state = lock_state(lock, self.opts.jit_stale_after_s)
+        if state == "stale":
+            break_lock(lock)
+        if state != "held":
+            job.wait_for_lock = None
+            return True
+        return False
+
+
+def _store(store: Store, row: dict[str, Any], outcome: JobOutcome, opts: RunOptions) -> None:
+    """Write the job; output that validated but cannot be stored makes it ``crashed``."""
+    try:
+        store.write_job(row, outcome, opts.stages, opts.fields, str(opts.shard))
+        return
+    except OSError as err:
+        if err.errno in (errno.ENOSPC, errno.EDQUOT, errno.EROFS):
+            raise StoreError(f"{store.run_dir}: cannot write the store ({err.strerror})") from None
+        detail = f"output could not be stored: {err}"
+    except (KeyError, ValueError, TypeError) as err:
+        detail = f"output could not be stored: {type(err).__name__}: {err}"
+    bad = outcome._replace(
+        failure_class=FailureClass.CRASHED, failure_detail=detail[:500], output=None
+    )
+    store.write_job(row, bad, opts.stages, opts.fields, str(opts.shard))
+
+
+def _order(jobs: pd.DataFrame, warmup: bool) -> list[dict[str, Any]]:
+    """Manifest order, except that the cheapest job goes first to warm the JIT cache."""
+    rows = jobs.to_dict("records")
+    if warmup and rows:
+        cost = estimate_cost(jobs)
+        first = int(cost.argmin())
+        rows.insert(0, rows.pop(first))
+    return rows
+
+
+class Terminated(WoundsweepError):
+    """SIGTERM (e.g. a batch system's time limit): running jobs were killed, the store is whole."""
+
+    exit_code = 143
+
+
+def _on_sigterm(signum: int, frame: Any) -> None:
+    raise Terminated("terminated by SIGTERM: running jobs killed; rerun to resume")
+
+
+def run_shard(run_dir: str | Path, opts: RunOptions) -> RunSummary:
+    """Run every job of ``opts.shard`` that is not already complete in the store."""
+    from tqdm import tqdm
+
+    t0 = time.time()
+    run = load_run(run_dir)
+    run_dir = run.run_dir
+    store = Store(run_dir, run.sweep)
+    store.ensure_dirs()
+    store.clean_tmp()
+    clear_stale_jit_locks(jit_cache_dir(), opts.jit_stale_after_s)
+    shard = shard_jobs(run.manifest, opts.shard)
+    todo, skipped = [], 0
+    for row in _order(shard, opts.warmup):
+        jid = str(row["job_id"])
+        st = store.job_state(jid, opts.stages, store.fingerprint(row))
+        if st.state in ("corrupt", "damaged"):  # damaged: its fields or mesh file go too
+            moved = store.quarantine(jid, files=st.state == "damaged")
+            print(f"woundsweep run: {st.reason}; moved to {moved}, rerunning", file=sys.stderr)
+        elif st.state == "done" and not (
+            opts.rerun_failed and st.failure_class != FailureClass.CONVERGED
+        ):
+            skipped += 1
+            continue
+        todo.append(Job(row))
+
+    runner = _Runner(run_dir, opts)
+    queue: deque[Job] = deque(todo)
+    failed = 0
+    tqdm.monitor_interval = 0  # no monitor thread: the runner forks with preexec_fn
+    bar = tqdm(
+        total=len(shard),
+        initial=skipped,
+        unit="job",
+        desc=f"shard {opts.shard}",
+        disable=None if opts.progress is None else not opts.progress,
+        smoothing=0.1,
+    )
+    old_term = signal.signal(signal.SIGTERM, _on_sigterm)
+    try:
+        while queue or runner.running:
+            limit = 1 if runner.warming else opts.workers
+            for _ in range(len(queue)):
+                if len(runner.running) >= limit:
+                    break
+                job = queue.popleft()
+                if runner.ready(job):
+                    runner.start(job)
+                else:
+                    queue.append(job)
+            finished = runner.poll()
+            for att, status, usage in finished:
+                outcome = runner.finish(att, status, usage)
+                if outcome is None:
+                    queue.append(att.job)
+                    continue
+                try:
+                    _store(store, att.job.row, outcome, opts)
+                finally:
+                    att.out.unlink(missing_ok=True)
+                runner.by_class[outcome.failure_class] = (
+                    runner.by_class.get(outcome.failure_class, 0) + 1
+                )
+                if outcome.failure_class != FailureClass.CONVERGED:
+                    failed += 1
+                bar.set_postfix(failed=failed, running=len(runner.running), refresh=False)
+                bar.update(1)
+            if not finished:  # else start the next jobs at once
+                runner.server.wait_any(opts.poll_s)
+    except BaseException:
+        runner.kill_all()
+        raise
+    finally:
+        signal.signal(signal.SIGTERM, old_term)
+        runner.server.close()
+        bar.close()
+    return RunSummary(
+        jobs=len(shard),
+        skipped=skipped,
+        ran=sum(runner.by_class.values()),
+        by_class=runner.by_class,
+        attempts=runner.attempts,
+        wall_time_s=time.time() - t0,
+    )

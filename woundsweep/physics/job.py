@@ -1,0 +1,328 @@
+"""One job through the stages: stress statistics, `StageResult` rows and the HDF5 output.
+
+Stress statistics of a stage (von Mises of sigma = J^-1 P F^T, paper eq. 20), over the
+samples of the stress (a P1 cell's constant value; a P2 cell's values at the points of a
+degree-4 rule, `WoundForms.von_mises_samples`, each holding its weight's share of the
+cell's volume):
+
+- ``p99_von_mises_kPa``, the "maximal stress": the volume-weighted 99th percentile, i.e. the
+  smallest sample value v such that samples with von Mises <= v hold at least 99% of the
+  reference volume (independent of how finely the mesh is graded);
+- ``p99_von_mises_nodal_kPa``: the unweighted 99th percentile (numpy's linear interpolation)
+  over nodal values, each the volume-weighted mean of the cell means around the node; this
+  is close to what the paper's code measured, for comparison only;
+- ``max_von_mises_kPa``, the largest sample, and its reference coordinates.
+
+The stored field and the profiles are cell means.
+
+The output file's layout is `woundsweep.store.solverfile`'s: the reported stages' `StageResult`
+fields plus diagnostics, the mesh in the input numbering, and the fields of every converged
+stage (an unconverged state is never written as a field).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, NamedTuple
+
+import numpy as np
+
+from ..core.errors import GeometryError, SolverError, WoundsweepError
+from ..core.schema import ExitCode, StageResult, StageStatus, start_stage
+from .profiles import line_maxima, locate_cells, profile_lines, sample_profiles
+
+if TYPE_CHECKING:
+    from .forms import StressSamples
+
+__all__ = [
+    "JobOutcome",
+    "NotConvergedError",
+    "StageRecord",
+    "job_model",
+    "run_stages",
+    "solve_job",
+    "stress_summary",
+    "write_output",
+]
+
+
+class NotConvergedError(WoundsweepError):
+    """A stage did not converge (the output file is written; the CLI exits with 3)."""
+
+    exit_code = ExitCode.NOT_CONVERGED
+
+
+class StageRecord(NamedTuple):
+    """A stage's result row, its diagnostics and (if converged) its fields in input order."""
+
+    result: StageResult
+    extra: dict[str, float | int | None]
+    displacement_mm: np.ndarray | None
+    von_mises_kPa: np.ndarray | None
+    # Von Mises on the `profiles` lines, (3, PROFILE_POINTS), if converged.
+    profiles_kPa: np.ndarray | None = None
+
+
+class JobOutcome(NamedTuple):
+    """What `solve_job` did."""
+
+    records: list[StageRecord]
+    exit_code: int
+    out: Path | None
+    jit_time_s: float
+
+
+def _weighted_quantile(values: np.ndarray, weights: np.ndarray, q: float) -> float:
+    order = np.argsort(values, kind="stable")
+    cum = np.cumsum(weights[order])
+    k = int(np.searchsorted(cum, q * cum[-1], side="left"))
+    return float(values[order][min(k, len(order) - 1)])
+
+
+_STRESS_KEYS = (
+    "p99_von_mises_kPa",
+    "max_von_mises_kPa",
+    "max_location_x_mm",
+    "max_location_y_mm",
+    "max_location_z_mm",
+)
+
+
+def stress_summary(
+    vm: np.ndarray,
+    volumes: np.ndarray,
+    cell_nodes: np.ndarray,
+    midpoints: np.ndarray,
+    samples: StressSamples | None = None,
+    corners: np.ndarray | None = None,
+) -> dict[str, float]:
+    """Volume-weighted and nodal p99, maximum and its location (see the module docstring).
+
+    ``vm`` are cell means; ``samples`` (with the cells' vertex coordinates ``corners``,
+    (cells, 4, 3)) replace them for p99 and the maximum. Without samples each cell is one
+    sample at its midpoint. A sample with det F <= 0 (a P2 cell inverted inside) has no
+    stress and is left out; the stage's ``min_J`` reports it.
+    """
+    vm = np.asarray(vm, dtype=float)
+    volumes = np.asarray(volumes, dtype=float)
+    n_nodes = int(cell_nodes.max()) + 1
+    num = np.zeros(n_nodes)
+    den = np.zeros(n_nodes)
+    for j in range(cell_nodes.shape[1]):
+        np.add.at(num, cell_nodes[:, j], vm * volumes)
+        np.add.at(den, cell_nodes[:, j], volumes)
+    nodal = num[den > 0] / den[den > 0]
+    nodal_p99 = float(np.percentile(nodal, 99))
+    sampled = samples is not None and corners is not None
+    if sampled:
+        values = np.asarray(samples.values, dtype=float)
+        weights = volumes[:, None] * np.asarray(samples.weights, dtype=float)[None, :]
+    else:
+        values, weights = vm[:, None], volumes[:, None]
+    valid = np.isfinite(values)
+    if sampled and samples.det_F is not None:
+        valid &= np.asarray(samples.det_F) > 0
+    if not valid.any():  # every sample inverted: no stress to report
+        return {key: math.nan for key in _STRESS_KEYS} | {"p99_von_mises_nodal_kPa": nodal_p99}
+    i, j = np.unravel_index(int(np.argmax(np.where(valid, values, -np.inf))), values.shape)
+    if sampled:
+        c = np.asarray(corners[i], dtype=float)
+        where = c[0] + (c[1:] - c[0]).T @ np.asarray(samples.points[j], dtype=float)
+    else:
+        where = np.asarray(midpoints[i], dtype=float)
+    return {
+        "p99_von_mises_kPa": _weighted_quantile(values[valid], weights[valid], 0.99),
+        "p99_von_mises_nodal_kPa": nodal_p99,
+        "max_von_mises_kPa": float(values[i, j]),
+        "max_location_x_mm": float(where[0]),
+        "max_location_y_mm": float(where[1]),
+        "max_location_z_mm": float(where[2]),
+    }
+
+
+def _finite(x: float | int | None) -> float | int | None:
+    """The number itself (ints stay ints), or None for None/NaN/inf (JSON null)."""
+    if x is None or (isinstance(x, float) and not math.isfinite(x)):
+        return None
+    return x if isinstance(x, int) else float(x)
+
+
+def _interpenetrating(stage: int, gap: float | None) -> int | None:
+    """The stage-3 flag: 1 if the closure gap is negative (the flanks overlap), else 0; None
+    for the other stages and for a gap that is not a number."""
+    if stage != 3 or gap is None or not math.isfinite(gap):
+        return None
+    return int(gap < 0)
+
+
+def run_stages(
+    model: Any,
+    materials: Any,
+    last_stage: int,
+    echo: Callable[[StageRecord], None] | None = None,
+) -> list[StageRecord]:
+    """Run stages 1..last_stage on a `woundsweep.physics.WoundModel`. A stage runs when the
+    stage before it ran and the stage it starts from (`schema.start_stage`) converged, so an
+    unconverged stage 3 does not stop stages 4-6. Returns one record per stage
+    1..last_stage (``not-run`` for a stage that could not run).
+    """
+    model.set_materials(materials)
+    d = model.domain
+    dofs = d.n_dofs
+    cells = len(d.cells)
+    cell_input_order = np.argsort(d.cell_input)
+    lines = profile_lines(d.X)
+    line_cells = locate_cells(d, lines.reshape(-1, 3)).reshape(lines.shape[:2])
+    records: list[StageRecord] = []
+    status = {0: StageStatus.CONVERGED}
+    for k in range(1, last_stage + 1):
+        ran = k == 1 or status[k - 1] != StageStatus.NOT_RUN
+        if not ran or status[start_stage(k)] != StageStatus.CONVERGED:
+            status[k] = StageStatus.NOT_RUN
+            records.append(StageRecord(StageResult(k, StageStatus.NOT_RUN), {}, None, None))
+            continue
+        out = model.run_stage(k)
+        s = out.solve
+        ok = s.status == StageStatus.CONVERGED
+        vm = model.forms.von_mises_cells() if ok else None
+        stats: dict[str, float] = {}
+        min_J = d.min_det(model.u)
+        if ok:
+            samples = model.forms.von_mises_samples()  # None on P1: the cells are the samples
+            corners = None if samples is None else d.X[d.cell_vertices]
+            stats = stress_summary(vm, d.volumes, d.cell_vertices, d.midpoints, samples, corners)
+            if samples is not None and samples.det_F is not None:
+                min_J = min(min_J, float(samples.det_F.min()))
+        gap = out.diagnostics.get("closure_gap_mm")
+        contact = {
+            key: _finite(out.diagnostics[key])
+            for key in ("n_penetrating", "max_penetration_mm", "contact_force_mN")
+            if key in out.diagnostics
+        }
+        result = StageResult(
+            stage=k,
+            status=s.status,
+            newton_iterations=int(s.iterations),
+            time_s=float(out.time_s),
+            closure_gap_mm=_finite(gap) if gap is not None else None,
+            interpenetrating=_interpenetrating(k, gap),
+            min_J=_finite(min_J),
+            residual_norm=_finite(s.residual_norm),
+            dofs=dofs,
+            cells=cells,
+            **stats,
+            **contact,
+        )
+        extra = {
+            "load_increments": int(s.increments),
+            "load_cuts": int(s.cuts),
+            "load_reached": float(s.load_reached),
+            "assembly_time_s": float(s.assembly_time_s),
+            "factor_time_s": float(s.factor_time_s),
+        }
+        extra.update({key: v for key, v in out.diagnostics.items() if key not in result._fields})
+        profiles = sample_profiles(line_cells, vm) if ok else None
+        if profiles is not None:
+            extra.update(line_maxima(lines, profiles))
+        rec = StageRecord(
+            result,
+            {key: _finite(v) for key, v in extra.items()},
+            model.displacement_input().astype(np.float32) if ok else None,
+            vm[cell_input_order].astype(np.float32) if ok else None,
+            profiles,
+        )
+        records.append(rec)
+        if echo is not None:
+            echo(rec)
+        status[k] = s.status
+    return records
+
+
+def write_output(
+    path: str | Path,
+    attrs: Mapping[str, Any],
+    mesh: Any,
+    records: list[StageRecord],
+    first_stage: int = 1,
+) -> None:
+    """Write the job's solver file atomically (records before ``first_stage`` are left out)."""
+    from ..store.solverfile import write_solver_file
+    from . import compat
+
+    keep = [r for r in records if r.result.stage >= first_stage]
+    rows = []
+    for r in keep:
+        row = r.result._asdict()
+        row.update(r.extra)
+        rows.append(row)
+    fields = {
+        r.result.stage: (r.displacement_mm, r.von_mises_kPa)
+        for r in keep
+        if r.displacement_mm is not None and r.von_mises_kPa is not None
+    }
+    lines = profile_lines(mesh.points).astype(np.float32)
+    profiles = {
+        r.result.stage: {
+            "profile_von_mises_kPa": r.profiles_kPa.astype(np.float32),
+            "profile_points_mm": lines,
+        }
+        for r in keep
+        if r.result.stage in fields and r.profiles_kPa is not None
+    }
+    attrs = {**attrs, "dolfinx_version": compat.DOLFINX_VERSION}
+    write_solver_file(path, attrs, mesh, rows, fields, profiles)
+
+
+def job_model(run: Any, row: Any, mesh: Any, jit: dict[str, Any] | None = None) -> tuple[Any, Any]:
+    """The `WoundModel` of a manifest row on ``mesh`` with the run's settings, and the job's
+    materials (GeometryError for a mesh that does not fit the contract)."""
+    from .materials import JobMaterials
+    from .stages import WoundModel
+
+    job_index = int(row["job_index"])
+    skin, angle = str(row["skin_type"]), float(row["orientation_deg"])
+    if skin not in run.sweep.materials.skin_types:
+        raise SolverError(f"job {job_index}: unknown skin type {skin!r}")
+    materials = JobMaterials.from_sweep(run.sweep.materials, skin, angle)
+    try:
+        model = WoundModel(mesh, run.sweep.solver, run.sweep.stages, jit=jit)
+    except ValueError as err:  # the mesh's tags or numbering do not fit the contract
+        raise GeometryError(f"job {job_index}: unusable mesh: {err}") from None
+    return model, materials
+
+
+def solve_job(
+    run_dir: str | Path,
+    job_index: int,
+    stages: tuple[int, int] = (1, 6),
+    out: str | Path | None = None,
+    echo: Callable[[StageRecord], None] | None = None,
+    jit: dict[str, Any] | None = None,
+) -> JobOutcome:
+    """Solve manifest job ``job_index`` of a run directory through ``stages`` (A, B).
+
+    Stages 1..B run (a later stage starts from the earlier ones); results of A..B are
+    reported and written to ``out`` (default ``RUN_DIR/solve/job_<N>.h5``).
+    """
+    from ..config.manifest import load_run
+    from ..mesh.cache import get_mesh
+
+    run = load_run(run_dir)
+    row = run.job(job_index)
+    mesh = get_mesh(run.run_dir, str(row["geometry_id"]), run.geometry(row)).mesh
+    model, materials = job_model(run, row, mesh, jit)
+    records = run_stages(model, materials, stages[1], echo=echo)
+    reported = [r for r in records if r.result.stage >= stages[0]]
+    ok = all(r.result.status == StageStatus.CONVERGED for r in records)
+    path = Path(out) if out is not None else run.run_dir / "solve" / f"job_{int(job_index)}.h5"
+    attrs = {
+        "job_id": str(row["job_id"]),
+        "job_index": int(job_index),
+        "geometry_id": str(row["geometry_id"]),
+        "jit_time_s": float(model.jit_time_s),
+    }
+    write_output(path, attrs, mesh, records, first_stage=stages[0])
+    code = ExitCode.OK if ok else ExitCode.NOT_CONVERGED
+    return JobOutcome(reported, code, path, model.jit_time_s)

@@ -1,0 +1,316 @@
+"""The result files' Arrow schema, their validation, and the validated reader of a run's rows.
+
+Every result file has the schema `result_schema` (fixed, so the files always form one
+dataset): the manifest columns, ``stage``, ``status``, the failure columns, the `StageResult`
+fields (`STAGE_FIELDS`) and the job's bookkeeping, including its `identity` fingerprint and
+the checksums of its fields and mesh files. Its footer record (key ``woundsweep``) holds the
+format version, the job id, the stages, the failure class, the fingerprint, the fields file
+with its size and sha256, the mesh file's sha256, and a sha256 of the rows' values, since page
+CRCs miss some damage (e.g. in page headers). `check_result` sorts a stored file into done,
+stale, corrupt or damaged; `read_results` returns the current rows of a run.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import re
+from collections.abc import Iterable, Mapping
+from pathlib import Path
+from typing import Any, NamedTuple
+
+import pandas as pd
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from ..config.manifest import load_run
+from ..config.sweep import MANIFEST_COLUMNS
+from ..core.errors import StoreError
+from ..core.schema import stage_field_kinds
+from ..core.versions import RESULT_FORMAT_VERSION
+from .identity import file_sha256, fingerprints
+
+__all__ = [
+    "META_KEY",
+    "RESULT_NAME",
+    "STAGE_FIELDS",
+    "FilesDamaged",
+    "ResultCheck",
+    "StoreScan",
+    "check_files",
+    "check_result",
+    "content_digest",
+    "read_results",
+    "result_files",
+    "result_schema",
+    "scan_results",
+    "scan_store",
+    "validate_result_file",
+]
+
+# The `StageResult` fields besides ``stage`` and ``status``, in its order, as Arrow types.
+STAGE_FIELDS: dict[str, pa.DataType] = {
+    name: pa.int64() if kind is int else pa.float64() for name, kind in stage_field_kinds().items()
+}
+_MANIFEST_STRINGS = ("job_id", "geometry_id", "wound_shape", "skin_type")
+_JOB_FIELDS: dict[str, pa.DataType] = {
+    "stage_extra_json": pa.string(),  # StageResult keys this version does not know, kept
+    "exit_code": pa.int64(),
+    "attempts": pa.int64(),
+    "job_wall_time_s": pa.float64(),
+    "job_cpu_time_s": pa.float64(),
+    "total_wall_time_s": pa.float64(),
+    "total_cpu_time_s": pa.float64(),
+    "max_rss_MiB": pa.float64(),
+    "started_at_utc": pa.timestamp("ms", tz="UTC"),
+    "finished_at_utc": pa.timestamp("ms", tz="UTC"),
+    "host": pa.string(),
+    "shard": pa.string(),
+    "stages_requested": pa.string(),
+    "fields": pa.string(),
+    "fields_file": pa.string(),
+    "mesh_file": pa.string(),
+    "woundsweep_version": pa.string(),
+    "dolfinx_version": pa.string(),
+    "python_version": pa.string(),
+    "jit_time_s": pa.float64(),  # the solver's form-compile (or cache load) time, if it says
+    "result_fingerprint": pa.string(),  # `identity.result_fingerprint` of the job's inputs
+    "fields_file_sha256": pa.string(),
+    "mesh_file_sha256": pa.string(),
+}
+META_KEY = b"woundsweep"
+# The names the store gives its result files; anything else in results/ is not the store's.
+RESULT_NAME = re.compile(r"job-([0-9a-f]{16})\.parquet")
+
+
+class FilesDamaged(StoreError):
+    """A result whose fields or mesh file is missing or differs from its recorded checksum."""
+
+
+def content_digest(table: pa.Table) -> str:
+    """sha256 of the table's values (canonical JSON), kept in the footer record."""
+    text = json.dumps(table.to_pylist(), sort_keys=True, default=str)
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def result_schema() -> pa.Schema:
+    """The Arrow schema of every result file."""
+    fields = []
+    for name in MANIFEST_COLUMNS:
+        if name == "job_index":
+            fields.append(pa.field(name, pa.int64()))
+        elif name in _MANIFEST_STRINGS:
+            fields.append(pa.field(name, pa.string()))
+        else:
+            fields.append(pa.field(name, pa.float64()))
+    fields += [
+        pa.field("stage", pa.int64()),
+        pa.field("status", pa.string()),
+        pa.field("failure_class", pa.string()),
+        pa.field("failed_stage", pa.int64()),
+        pa.field("failure_detail", pa.string()),
+    ]
+    fields += [pa.field(k, t) for k, t in STAGE_FIELDS.items()]
+    fields += [pa.field(k, t) for k, t in _JOB_FIELDS.items()]
+    return pa.schema(fields)
+
+
+def _footer(path: Path) -> dict[str, Any] | None:
+    """The footer record alone (cheap: the Parquet footer), or None if it cannot be read."""
+    try:
+        raw = (pq.read_schema(path).metadata or {}).get(META_KEY)
+        meta = json.loads(raw)
+    except Exception:  # noqa: BLE001 - damaged files are the full validator's to name
+        return None
+    return meta if isinstance(meta, dict) else None
+
+
+def validate_result_file(
+    path: Path,
+    job_id: str | None,
+    run_dir: Path,
+    *,
+    verify_files: bool = False,
+    memo: dict | None = None,
+) -> dict[str, Any]:
+    """Read a whole result file with page checksums; returns its footer record.
+
+    Raises `StoreError` for a damaged Parquet file and `FilesDamaged` when its fields or mesh
+    file is missing, has another size, or (``verify_files``) another sha256 than recorded.
+    The record's ``_table`` holds the file's table.
+    """
+    if not path.is_file():  # a named pipe would block the reader
+        raise StoreError(f"{path}: corrupt result file (not a regular file)")
+    try:
+        table = pq.read_table(path, page_checksum_verification=True)
+    except Exception as err:  # pyarrow raises OSError, ArrowInvalid, ... for damaged files
+        raise StoreError(f"{path}: corrupt result file ({type(err).__name__})") from None
+    if not table.schema.remove_metadata().equals(result_schema()):
+        raise StoreError(f"{path}: corrupt result file (columns differ from the result schema)")
+    raw = (table.schema.metadata or {}).get(META_KEY)
+    try:
+        meta = json.loads(raw)
+        lo, hi = (int(s) for s in meta["stages"])
+        if not isinstance(meta.get("sha256"), str):
+            raise TypeError
+    except (TypeError, ValueError, KeyError, AttributeError):
+        raise StoreError(
+            f"{path}: corrupt result file (no valid woundsweep footer record)"
+        ) from None
+    if meta["sha256"] != content_digest(table):
+        raise StoreError(f"{path}: corrupt result file (content checksum mismatch)")
+    if job_id is not None and meta.get("job_id") != job_id:
+        raise StoreError(f"{path}: holds job {meta.get('job_id')!r}, not {job_id!r}")
+    found = table.column("stage").to_pylist()
+    if found != list(range(lo, hi + 1)):
+        raise StoreError(f"{path}: expected stages {lo}-{hi}, found {found}")
+    check_files(path, meta, run_dir, verify=verify_files, memo=memo)
+    meta["_table"] = table
+    return meta
+
+
+def check_files(
+    path: Path, meta: dict[str, Any], run_dir: Path, *, verify: bool, memo: dict | None = None
+) -> None:
+    """`FilesDamaged` unless the fields and mesh files of result ``path`` (footer ``meta``)
+    exist with the recorded size and, with ``verify``, the recorded sha256."""
+    ff = meta.get("fields_file") or ""
+    if ff:
+        fpath = run_dir / "fields" / ff
+        if not fpath.is_file() or fpath.stat().st_size != meta.get("fields_bytes"):
+            raise FilesDamaged(f"{path}: its fields file {fpath} is missing or truncated")
+        if verify and file_sha256(fpath, memo) != meta.get("fields_sha256"):
+            raise FilesDamaged(f"{path}: its fields file {fpath} is damaged (sha256 differs)")
+    mf = meta.get("mesh_file") or ""
+    if mf:
+        mpath = run_dir / "fields" / mf
+        if not mpath.is_file():
+            raise FilesDamaged(f"{path}: its mesh file {mpath} is missing")
+        if verify and file_sha256(mpath, memo) != meta.get("mesh_sha256"):
+            raise FilesDamaged(f"{path}: its mesh file {mpath} is damaged (sha256 differs)")
+
+
+class ResultCheck(NamedTuple):
+    """One stored result: ``state`` is ``done``, ``stale``, ``corrupt`` or ``damaged``."""
+
+    state: str
+    reason: str = ""
+    meta: dict[str, Any] | None = None
+
+
+def check_result(
+    path: Path,
+    job_id: str,
+    run_dir: Path,
+    fingerprint: str | None,
+    *,
+    verify_files: bool = True,
+    memo: dict | None = None,
+) -> ResultCheck:
+    """Sort one result file: corrupt (the Parquet file), stale (another result format or
+    another fingerprint than ``fingerprint``), damaged (its fields or mesh file), or done."""
+    footer = _footer(path) if path.is_file() else None
+    if footer is not None and footer.get("format") != RESULT_FORMAT_VERSION:
+        return ResultCheck("stale", f"written in result format {footer.get('format')!r}")
+    try:
+        meta = validate_result_file(path, job_id, run_dir, verify_files=False)
+    except FilesDamaged as err:  # the Parquet file is whole: its fields or mesh file is not
+        return ResultCheck("damaged", str(err), _footer(path))
+    except StoreError as err:
+        return ResultCheck("corrupt", str(err))
+    if fingerprint is not None and meta.get("fingerprint") != fingerprint:
+        return ResultCheck("stale", "computed with other settings (fingerprint differs)", meta)
+    if verify_files:
+        try:
+            check_files(path, meta, run_dir, verify=True, memo=memo)
+        except FilesDamaged as err:
+            return ResultCheck("damaged", str(err), meta)
+    return ResultCheck("done", "", meta)
+
+
+def result_files(run_dir: Path) -> tuple[dict[str, Path], list[Path]]:
+    """The store's result files by job id, and the stray files of ``results/`` (ignored)."""
+    results_dir = run_dir / "results"
+    found: dict[str, Path] = {}
+    stray: list[Path] = []
+    if results_dir.is_dir():
+        for p in sorted(results_dir.iterdir()):
+            m = RESULT_NAME.fullmatch(p.name)
+            if m and p.is_file():
+                found[m.group(1)] = p
+            elif not p.name.startswith("."):  # dot files are writers' temporaries
+                stray.append(p)
+    return found, stray
+
+
+class StoreScan(NamedTuple):
+    """What `scan_store` found: checks of manifest jobs, orphans, stray files."""
+
+    checks: dict[str, ResultCheck]
+    orphans: list[str]
+    stray: list[Path]
+
+    def count(self, state: str) -> int:
+        return sum(c.state == state for c in self.checks.values())
+
+
+def scan_store(run_dir: str | Path, *, verify_files: bool = True) -> StoreScan:
+    """Check every result file of the run's manifest jobs (checksums of the fields and mesh
+    files too, unless ``verify_files`` is false); moves nothing."""
+    rd = Path(run_dir)
+    run = load_run(rd)
+    expected = fingerprints(run.sweep, run.manifest)
+    files, stray = result_files(rd)
+    memo: dict = {}
+    checks = {
+        jid: check_result(p, jid, rd, expected[jid], verify_files=verify_files, memo=memo)
+        for jid, p in files.items()
+        if jid in expected
+    }
+    orphans = [jid for jid in files if jid not in expected]
+    return StoreScan(checks, orphans, stray)
+
+
+def _frame(tables: list[pa.Table]) -> pd.DataFrame:
+    if not tables:
+        return result_schema().empty_table().to_pandas()
+    return pa.concat_tables([t.replace_schema_metadata(None) for t in tables]).to_pandas()
+
+
+def read_results(run_dir: str | Path, job_ids: Iterable[str] | None = None) -> pd.DataFrame:
+    """The current result rows of a run, one per job and stage (an empty frame if none).
+
+    Every file is validated (page checksums, footer record, schema, fields file size); a bad
+    one raises ``StoreError`` naming it, on one line, with the fix. Results of manifest jobs
+    computed with other settings (stale) are left out; so are stray files in ``results/``.
+    Jobs not in the manifest (orphans of an earlier sweep) are returned: callers filter them.
+    """
+    run_dir = Path(run_dir)
+    files, _ = result_files(run_dir)
+    expected: Mapping[str, str] = {}
+    if (run_dir / "manifest.parquet").is_file() and (run_dir / "sweep.yaml").is_file():
+        run = load_run(run_dir)
+        expected = fingerprints(run.sweep, run.manifest)
+    if job_ids is not None:
+        wanted = set(job_ids)
+        files = {j: p for j, p in files.items() if j in wanted}
+    tables = []
+    for jid, p in files.items():
+        footer = _footer(p)
+        if footer is not None and footer.get("format") != RESULT_FORMAT_VERSION:
+            continue  # another result format: stale (or an orphan that cannot be read)
+        try:
+            meta = validate_result_file(p, jid, run_dir)
+        except StoreError as err:
+            raise StoreError(
+                f"{err}; rerun `woundsweep run {run_dir}` (it moves the file aside and redoes the job)"
+            ) from None
+        if jid in expected and meta.get("fingerprint") != expected[jid]:
+            continue
+        tables.append(meta["_table"])
+    return _frame(tables)
+
+
+def scan_results(scan: StoreScan) -> pd.DataFrame:
+    """The rows of the results a scan found done (what `woundsweep status` counts)."""
+    return _frame([c.meta["_table"] for c in scan.checks.values() if c.state == "done" and c.meta])

@@ -20,6 +20,7 @@ import yaml
 
 from woundsweep.config.manifest import expand
 from woundsweep.config.sweep import parse_sweep
+from woundsweep.core.diagnostics import StageReport
 from woundsweep.core.schema import ExitCode, FailureClass, StageResult, StageStatus
 from woundsweep.store.solverfile import SolverOutput
 from woundsweep.store.writer import JobOutcome, Store
@@ -178,16 +179,19 @@ def write_results(run_dir: str | Path, rows: pd.DataFrame) -> None:
     for idx in rows.groupby("job_id", sort=False).indices.values():
         job = [records[i] for i in idx]
         stages = {
-            int(r["stage"]): {
-                "status": r["status"],
-                **{f: r[f] for f in fields},
-                **{c: r[c] for c in extra if pd.notna(r[c])},
-            }
+            int(r["stage"]): StageReport.from_row(
+                {
+                    "stage": int(r["stage"]),
+                    "status": r["status"],
+                    **{f: r[f] for f in fields},
+                    **{c: r[c] for c in extra if pd.notna(r[c])},
+                }
+            )
             for r in job
             if r["status"] != StageStatus.NOT_RUN
         }
         converged = len(stages) == len(job) and all(
-            s["status"] == StageStatus.CONVERGED for s in stages.values()
+            s.status == StageStatus.CONVERGED for s in stages.values()
         )
         outcome = JobOutcome(
             failure_class=(

@@ -21,6 +21,7 @@ import yaml
 from woundsweep.config.geometry import GeometrySpec
 from woundsweep.config.manifest import expand
 from woundsweep.config.sweep import parse_sweep
+from woundsweep.core.diagnostics import StageReport
 from woundsweep.core.schema import ExitCode, FailureClass, StageStatus
 from woundsweep.mesh.cache import get_mesh
 from woundsweep.store.solverfile import read_solver_file, write_solver_file
@@ -98,7 +99,7 @@ def make_store(run_dir: str | Path) -> Path:
             rows.append(_row(4, StageStatus.MAX_ITERATIONS.value, None, n_cells))
         path = rd / "tmp" / f"{job['job_id']}.h5"
         attrs = {"job_id": job["job_id"], "job_index": j, "geometry_id": job["geometry_id"]}
-        write_solver_file(path, attrs, mesh, rows, fields)
+        write_solver_file(path, attrs, mesh, [StageReport.from_row(r) for r in rows], fields)
         out = read_solver_file(path, job["job_id"], (1, 6))
         if j == 1:
             outcome = _outcome(FailureClass.NOT_CONVERGED.value, out, int(ExitCode.NOT_CONVERGED))

@@ -10,12 +10,12 @@ its edges halfway between samples, so that every bin counts the same number of p
 
 from __future__ import annotations
 
-import json
 from typing import Any
 
 import numpy as np
 import pandas as pd
 
+from ..core.diagnostics import parse_diagnostics
 from ..core.schema import PROFILE_LINES, PROFILE_POINTS
 from .settings import STAGE_GROUPS
 
@@ -63,7 +63,7 @@ def profile_positions(rows: pd.DataFrame) -> pd.DataFrame:
     for name, stages in STAGE_GROUPS:
         group[np.isin(stage, stages)] = name
     extra = rows["stage_extra_json"] if "stage_extra_json" in rows else pd.Series(None, rows.index)
-    parsed = [json.loads(s) if isinstance(s, str) and s else {} for s in extra]
+    parsed = [parse_diagnostics(s) for s in extra]
     out = pd.DataFrame({"stage_group": group})
     for line in PROFILE_LINES:
         key = f"profile_{line}_max_at_mm"

@@ -85,9 +85,7 @@ def classify(
                 FailureClass.CRASHED, f"exit {code} without a valid output: {err}", None
             )
         missing = [k for k in range(stages[0], stages[1] + 1) if k not in out.stages]
-        bad = [
-            k for k in sorted(out.stages) if out.stages[k].get("status") != StageStatus.CONVERGED
-        ]
+        bad = [k for k in sorted(out.stages) if out.stages[k].status != StageStatus.CONVERGED]
         if code == ExitCode.OK and missing:
             return Classified(
                 FailureClass.CRASHED, f"exit 0 but no result for stages {missing}", None
@@ -96,7 +94,7 @@ def classify(
             what = "exit 3"
             if bad:
                 first = out.stages[bad[0]]
-                what = f"stage {bad[0]} {first['status']}{stability_note(first)}"
+                what = f"stage {bad[0]} {first.status}{stability_note(first.diagnostics)}"
             return Classified(FailureClass.NOT_CONVERGED, what, out)
         return Classified(FailureClass.CONVERGED, "", out)
     last = next((ln for ln in reversed(tail.strip().splitlines()) if ln.strip()), "")[:300]

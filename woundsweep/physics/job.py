@@ -29,6 +29,7 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
+from ..core.diagnostics import StageDiagnostics, StageReport
 from ..core.errors import GeometryError, SolverError, WoundsweepError
 from ..core.schema import ExitCode, StageResult, StageStatus, start_stage
 from .profiles import line_maxima, locate_cells, profile_lines, sample_profiles
@@ -58,7 +59,7 @@ class StageRecord(NamedTuple):
     """A stage's result row, its diagnostics and (if converged) its fields in input order."""
 
     result: StageResult
-    extra: dict[str, float | int | None]
+    extra: StageDiagnostics
     displacement_mm: np.ndarray | None
     von_mises_kPa: np.ndarray | None
     # Von Mises on the `profiles` lines, (3, PROFILE_POINTS), if converged.
@@ -252,11 +253,7 @@ def write_output(
     from . import compat
 
     keep = [r for r in records if r.result.stage >= first_stage]
-    rows = []
-    for r in keep:
-        row = r.result._asdict()
-        row.update(r.extra)
-        rows.append(row)
+    reports = [StageReport(r.result, r.extra) for r in keep]
     fields = {
         r.result.stage: (r.displacement_mm, r.von_mises_kPa)
         for r in keep
@@ -272,7 +269,7 @@ def write_output(
         if r.result.stage in fields and r.profiles_kPa is not None
     }
     attrs = {**attrs, "dolfinx_version": compat.DOLFINX_VERSION}
-    write_solver_file(path, attrs, mesh, rows, fields, profiles)
+    write_solver_file(path, attrs, mesh, reports, fields, profiles)
 
 
 def job_model(run: Any, row: Any, mesh: Any, jit: dict[str, Any] | None = None) -> tuple[Any, Any]:

@@ -19,6 +19,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from .. import __version__
+from ..core.diagnostics import StageReport
 from ..core.errors import StoreError
 from ..core.fsutil import atomic_write
 from ..core.schema import UNITS, StageStatus
@@ -70,22 +71,22 @@ class SolverOutput(NamedTuple):
 
     path: Path
     attrs: dict[str, Any]
-    stages: dict[int, dict[str, Any]]
+    stages: dict[int, StageReport]
 
 
 def write_solver_file(
     path: str | Path,
     attrs: Mapping[str, Any],
     mesh: Any,
-    rows: Sequence[Mapping[str, Any]],
+    reports: Sequence[StageReport],
     fields: Mapping[int, tuple[np.ndarray, np.ndarray]],
     extra: Mapping[int, Mapping[str, np.ndarray]] | None = None,
 ) -> None:
     """Write a solver file atomically.
 
     ``attrs`` holds the job's root attributes (``woundsweep_version`` and ``units`` are
-    added), ``mesh`` has ``points``, ``cells`` and ``cell_tags``, ``rows`` are the reported
-    stages' result dicts, and ``fields`` maps a converged stage to its (displacement,
+    added), ``mesh`` has ``points``, ``cells`` and ``cell_tags``, ``reports`` are the reported
+    stages', and ``fields`` maps a converged stage to its (displacement,
     von Mises) arrays in `STAGE_DATASETS` order; ``extra`` adds datasets to a converged
     stage's group (e.g. `PROFILE_DATASETS`).
     """
@@ -97,7 +98,7 @@ def write_solver_file(
                 f.attrs[k] = v
             f.attrs["woundsweep_version"] = __version__
             f.attrs["units"] = UNITS
-            f.attrs["stage_results"] = json.dumps(list(rows))
+            f.attrs["stage_results"] = json.dumps([r.to_row() for r in reports])
             g = f.create_group(MESH_GROUP)
             for name, dtype in MESH_DATASETS.items():
                 g.create_dataset(name, data=np.asarray(getattr(mesh, name), dtype=dtype))
@@ -138,13 +139,15 @@ def read_solver_file(path: str | Path, job_id: str, stages: tuple[int, int]) -> 
         raise StoreError(f"{path}: job_id {attrs.get('job_id')!r} is not {job_id!r}")
     try:
         rows = json.loads(attrs.get("stage_results", ""))
-        by_stage = {int(r["stage"]): dict(r) for r in rows}
+        by_stage = {int(r["stage"]): r for r in rows}
     except (ValueError, TypeError, KeyError) as err:
         raise StoreError(f"{path}: bad stage_results attribute ({err})") from None
-    statuses = {s.value for s in StageStatus}
+    reports: dict[int, StageReport] = {}
     for k, r in by_stage.items():
-        if r.get("status") not in statuses:
-            raise StoreError(f"{path}: stage {k} has unknown status {r.get('status')!r}")
+        try:
+            reports[k] = StageReport.from_row(r)
+        except ValueError as err:
+            raise StoreError(f"{path}: stage {k} has {err}") from None
         have = groups.get(stage_group(k), set())
         if r["status"] == StageStatus.CONVERGED and not set(STAGE_DATASETS) <= have:
             raise StoreError(
@@ -157,5 +160,5 @@ def read_solver_file(path: str | Path, job_id: str, stages: tuple[int, int]) -> 
             raise StoreError(f"{path}: group {g} is incomplete ({sorted(names)})")
     attrs["_groups"] = sorted(groups)
     return SolverOutput(
-        path, attrs, {k: v for k, v in by_stage.items() if stages[0] <= k <= stages[1]}
+        path, attrs, {k: v for k, v in reports.items() if stages[0] <= k <= stages[1]}
     )

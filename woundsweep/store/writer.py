@@ -45,12 +45,13 @@ import pyarrow.parquet as pq
 from .. import __version__
 from ..config.manifest import load_run
 from ..config.sweep import MANIFEST_COLUMNS, Sweep, load_sweep
+from ..core.diagnostics import StageReport
 from ..core.errors import StoreError
 from ..core.fsutil import atomic_write
-from ..core.schema import FailureClass, StageStatus
+from ..core.schema import FailureClass, StageResult, StageStatus
 from ..core.versions import RESULT_FORMAT_VERSION
 from .identity import file_sha256, fingerprints, result_fingerprint
-from .reader import META_KEY, STAGE_FIELDS, check_result, content_digest, result_schema
+from .reader import META_KEY, check_result, content_digest, result_schema
 from .solverfile import MESH_DATASETS, MESH_GROUP, SolverOutput, stage_group, stage_of_group
 
 __all__ = [
@@ -327,11 +328,7 @@ class Store:
             )
         failed_stage = None
         if outcome.failure_class == FailureClass.NOT_CONVERGED and out is not None:
-            bad = [
-                k
-                for k in sorted(out.stages)
-                if out.stages[k].get("status") != StageStatus.CONVERGED
-            ]
+            bad = [k for k in sorted(out.stages) if out.stages[k].status != StageStatus.CONVERGED]
             failed_stage = bad[0] if bad else None
         attrs = out.attrs if out is not None else {}
         base: dict[str, Any] = {}
@@ -367,15 +364,13 @@ class Store:
         }
         rows = []
         for k in range(stages[0], stages[1] + 1):
-            sr = dict(out.stages.get(k, {})) if out is not None else {}
+            report = out.stages.get(k) if out is not None else None
+            if report is None:
+                report = StageReport(StageResult(k, StageStatus.NOT_RUN.value), {})
             row = dict(base)
+            row.update(report.result._asdict())
             row["stage"] = k
-            row["status"] = sr.pop("status", StageStatus.NOT_RUN.value)
-            sr.pop("stage", None)
-            for name in STAGE_FIELDS:
-                v = sr.pop(name, None)
-                row[name] = None if v is None or (isinstance(v, float) and np.isnan(v)) else v
-            row["stage_extra_json"] = json.dumps(sr, sort_keys=True) if sr else None
+            row["stage_extra_json"] = report.diagnostics_json()
             row.update(common)
             rows.append(row)
         table = pa.Table.from_pylist(rows, schema=result_schema())

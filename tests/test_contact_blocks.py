@@ -89,7 +89,7 @@ class Blocks:
         self.mesh, self.cell_mt, self.facet_mt = compat.mesh_from_arrays(
             pts, cells, ctags, load, np.full(len(load), LOAD)
         )
-        self.V = compat.vector_space(self.mesh)
+        self.V = compat.vector_space(self.mesh, 1)
         self.u = dolfinx.fem.Function(self.V)
         node_input = compat.node_input_index(self.V)
         input_node = np.full(len(pts), -1, dtype=np.int64)

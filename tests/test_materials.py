@@ -167,7 +167,7 @@ def _ufl_stress(material_name: str, params: list[tuple[object, np.ndarray]]) -> 
     cells = np.array([[0, 1, 2, 3]])
     facets = np.array([[0, 1, 2]])
     mesh, _, _ = compat.mesh_from_arrays(pts, cells, np.array([1]), facets, np.array([16]))
-    V = compat.vector_space(mesh)
+    V = compat.vector_space(mesh, 1)
     u = dolfinx.fem.Function(V)
     q = ufl.TestFunction(compat.dg0_space(mesh))
     template = params[0][0]

@@ -159,7 +159,7 @@ def main() -> int:
         return f"{len(tri)} facets, all on their side"
 
     check("facet meshtags (midpoints on the tagged side)", facet_tags)
-    V = check("vector_space", lambda: compat.vector_space(msh))
+    V = check("vector_space", lambda: compat.vector_space(msh, 1))
     Q = check("dg0_space", lambda: compat.dg0_space(msh))
 
     def node_index() -> str:

@@ -12,6 +12,7 @@ import hashlib
 import itertools
 import json
 import math
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, NamedTuple
 
@@ -148,7 +149,7 @@ class Run(NamedTuple):
             raise StoreError(f"no job {job_index} (the run has jobs 0-{len(self.manifest) - 1})")
         return {k: (v.item() if isinstance(v, np.generic) else v) for k, v in hit.iloc[0].items()}
 
-    def geometry(self, row: Any) -> GeometrySpec:
+    def geometry(self, row: Mapping[str, Any]) -> GeometrySpec:
         """The `GeometrySpec` of a manifest row with the sweep's closure zone and element
         degree (both part of the mesh); GeometryError names the job."""
         return GeometrySpec.from_row(

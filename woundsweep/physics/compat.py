@@ -171,7 +171,7 @@ def mesh_from_arrays(
 # -- spaces, functions, forms ----------------------------------------------------------------
 
 
-def vector_space(mesh: Any, degree: int = 1) -> Any:
+def vector_space(mesh: Any, degree: int) -> Any:
     """Continuous Lagrange vector (displacement) space of the given degree."""
     if hasattr(dolfinx.fem, "functionspace"):
         return dolfinx.fem.functionspace(mesh, ("Lagrange", degree, (mesh.geometry.dim,)))

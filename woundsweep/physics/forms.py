@@ -74,7 +74,7 @@ class WoundForms:
     """
 
     def __init__(
-        self, domain: WoundDomain, quadrature_degree: int = 1, jit: dict[str, Any] | None = None
+        self, domain: WoundDomain, quadrature_degree: int, jit: dict[str, Any] | None = None
     ) -> None:
         mesh, V = domain.mesh, domain.V
         self.u = dolfinx.fem.Function(V)

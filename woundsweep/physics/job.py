@@ -35,7 +35,10 @@ from ..core.schema import ExitCode, StageResult, StageStatus, start_stage
 from .profiles import line_maxima, locate_cells, profile_lines, sample_profiles
 
 if TYPE_CHECKING:
+    from ..config.manifest import Run
     from .forms import StressSamples
+    from .materials import JobMaterials
+    from .stages import WoundModel
 
 __all__ = [
     "JobOutcome",
@@ -159,8 +162,8 @@ def _interpenetrating(stage: int, gap: float | None) -> int | None:
 
 
 def run_stages(
-    model: Any,
-    materials: Any,
+    model: WoundModel,
+    materials: JobMaterials,
     last_stage: int,
     echo: Callable[[StageRecord], None] | None = None,
 ) -> list[StageRecord]:
@@ -272,7 +275,9 @@ def write_output(
     write_solver_file(path, attrs, mesh, reports, fields, profiles)
 
 
-def job_model(run: Any, row: Any, mesh: Any, jit: dict[str, Any] | None = None) -> tuple[Any, Any]:
+def job_model(
+    run: Run, row: Mapping[str, Any], mesh: Any, jit: dict[str, Any] | None = None
+) -> tuple[WoundModel, JobMaterials]:
     """The `WoundModel` of a manifest row on ``mesh`` with the run's settings, and the job's
     materials (GeometryError for a mesh that does not fit the contract)."""
     from .materials import JobMaterials

@@ -28,6 +28,7 @@ from typing import Any, NamedTuple
 import numpy as np
 import pandas as pd
 
+from ..config.manifest import Run
 from ..config.sweep import GEOMETRY_KEYS
 from ..core.errors import StoreError
 from ..core.schema import STAGES, StageStatus
@@ -204,7 +205,7 @@ def _analysis(run_dir: Path, out: Path) -> int:
 
 
 def build_atlas(
-    run: Any,
+    run: Run,
     results: pd.DataFrame,
     out: str | Path,
     views: set[int],

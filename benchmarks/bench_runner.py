@@ -166,7 +166,7 @@ def main() -> int:
                 )
                 from woundsweep.config.manifest import load_run
                 from woundsweep.store.solverfile import read_solver_file
-                from woundsweep.store.writer import JobOutcome, Store
+                from woundsweep.store.writer import AttemptOutcome, Store
 
                 # Store write alone, for one real result re-solved to a scratch file.
                 run = load_run(rd)
@@ -180,7 +180,9 @@ def main() -> int:
                 if out.exists():
                     a, b = (int(x) for x in args.stages.split("-"))
                     so = read_solver_file(out, row["job_id"], (a, b))
-                    oc = JobOutcome("converged", "", 0, 1, 1.0, 1.0, 1.0, 1.0, None, 0.0, 1.0, so)
+                    oc = AttemptOutcome(
+                        "converged", "", 0, 1, 1.0, 1.0, 1.0, 1.0, None, 0.0, 1.0, so
+                    )
                     scratch = tmp_path / "scratch"
                     scratch.mkdir()
                     t0 = time.perf_counter()

@@ -55,7 +55,7 @@ from .solverfile import MESH_DATASETS, MESH_GROUP, SolverOutput, stage_group, st
 
 __all__ = [
     "FIELDS_CHOICES",
-    "JobOutcome",
+    "AttemptOutcome",
     "JobState",
     "Store",
 ]
@@ -63,7 +63,7 @@ __all__ = [
 FIELDS_CHOICES = ("all", "final", "none")
 
 
-class JobOutcome(NamedTuple):
+class AttemptOutcome(NamedTuple):
     """What the runner learned about one job (its last attempt, times summed over attempts)."""
 
     failure_class: str
@@ -311,7 +311,7 @@ class Store:
     def write_job(
         self,
         job: dict[str, Any],
-        outcome: JobOutcome,
+        outcome: AttemptOutcome,
         stages: tuple[int, int],
         fields: str,
         shard: str,

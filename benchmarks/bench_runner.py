@@ -4,8 +4,8 @@ Prints:
 - per-job overhead of the runner: a job whose solve exits at once (test-only fault switch
   ``exit:0``: the fork from the runner's fork server, classification, the store write of its
   rows), measured through the real runner; plus what a real job pays before its solve (the
-  solver-stack imports and loading the run; ~0 in a forked child, shown beside the cost in a
-  fresh interpreter); against the median wall time of a real demo job;
+  solver-stack imports and loading the run, in a forked child and in a fresh interpreter);
+  against the median wall time of a real demo job;
 - the store write alone for a real solver output (fields "final");
 - jobs per hour with 1 and with 2 workers on the same jobs (a fresh RUN_DIR each, after one
   warm-up job so both start from a warm JIT cache).

@@ -24,6 +24,8 @@ import ufl
 from mpi4py import MPI
 from petsc4py import PETSc
 
+from ..contact.geometry import face_keys
+
 __all__ = [
     "DOLFINX_VERSION",
     "assemble_matrix",
@@ -110,11 +112,6 @@ def cell_input_index(mesh: Any) -> np.ndarray:
     return np.asarray(mesh.topology.original_cell_index, dtype=np.int64)[: num_cells(mesh)]
 
 
-def _sorted_keys(tri: np.ndarray, n: int) -> np.ndarray:
-    t = np.sort(np.asarray(tri, dtype=np.int64), axis=1)
-    return (t[:, 0] * n + t[:, 1]) * n + t[:, 2]
-
-
 def facet_meshtags(mesh: Any, facets: np.ndarray, values: np.ndarray) -> Any:
     """MeshTags on the facets given as triangles of input point indices (k, 3)."""
     facets = np.asarray(facets, dtype=np.int64).reshape(-1, 3)
@@ -126,9 +123,9 @@ def facet_meshtags(mesh: Any, facets: np.ndarray, values: np.ndarray) -> Any:
     f2v = _connectivity(mesh, fdim, 0, 3)
     inp = vertex_input_index(mesh)
     n = int(max(inp.max(initial=0), facets.max(initial=0))) + 1
-    mesh_keys = _sorted_keys(inp[f2v], n)
+    mesh_keys = face_keys(inp[f2v], n)
     order = np.argsort(mesh_keys)
-    want = _sorted_keys(facets, n)
+    want = face_keys(facets, n)
     pos = np.searchsorted(mesh_keys, want, sorter=order)
     pos = np.minimum(pos, len(order) - 1)
     found = mesh_keys[order[pos]] == want

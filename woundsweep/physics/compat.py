@@ -40,6 +40,7 @@ __all__ = [
     "dg0_space",
     "evaluate_expression",
     "facet_meshtags",
+    "jit_defaults",
     "jit_options",
     "mesh_from_arrays",
     "node_input_index",
@@ -225,7 +226,8 @@ def petsc_vec(u: Any) -> PETSc.Vec:
 KERNEL_CFLAGS = ("-O3", "-g0", "-fno-math-errno", "-funsafe-math-optimizations")
 
 
-def _jit_defaults() -> dict[str, Any]:
+def jit_defaults() -> dict[str, Any]:
+    """DOLFINx's default JIT options ({} if this version has no such table)."""
     import dolfinx.jit
 
     for name in ("DOLFINX_DEFAULT_JIT_OPTIONS", "DOLFINX_DEFAULT_JIT_PARAMETERS"):
@@ -239,7 +241,7 @@ def jit_options(cache_dir: str | Path | None = None, timeout_s: int = 900) -> di
     """JIT options: a long lock timeout so concurrent jobs wait for one compile, not fail, and
     `KERNEL_CFLAGS` where this DOLFINx takes compiler arguments."""
     opts: dict[str, Any] = {"timeout": int(timeout_s)}
-    if "cffi_extra_compile_args" in _jit_defaults():
+    if "cffi_extra_compile_args" in jit_defaults():
         opts["cffi_extra_compile_args"] = list(KERNEL_CFLAGS)
     if cache_dir is not None:
         opts["cache_dir"] = str(cache_dir)

@@ -77,7 +77,7 @@ def main() -> int:
     logging.getLogger().setLevel(logging.WARNING)  # no compiler command lines
     T = 2.0  # bench_solver.py's "mid-size" job
     mesh = build_mesh(GeometrySpec.wedge(1.0, 1.0, 2 * T, 0.3 * 2 * T, 0.5 * T, 0.5))
-    defaults = compat._jit_defaults().get("cffi_extra_compile_args")
+    defaults = compat.jit_defaults().get("cffi_extra_compile_args")
     default_flags = list(defaults[0]) if defaults else None
     out = {}
     for label, flags in (("DOLFINx default", None), ("KERNEL_CFLAGS", list(compat.KERNEL_CFLAGS))):

@@ -6,11 +6,10 @@ Usage::
     python benchmarks/bench_geometry.py --all    # every paper geometry (sweeps/paper.yaml)
 
 The fixed set spans both shapes, the smallest and the largest patches and the three mesh
-size factors. ``--all`` builds all 1,296 paper geometries once (single-threaded gmsh,
-0.1-0.5 s each on an idle core: 4-10 minutes) and prints the cell-count distribution
-(min / median / max, per mesh size factor), the worst element quality, whether each
-geometry's cell count increases strictly with the mesh size factor, and whether any geometry
-exceeds the paper's 40,000-cell cap. Exit status 1 if either check fails.
+size factors. ``--all`` builds all 1,296 paper geometries once (single-threaded gmsh) and
+prints the cell-count distribution (min / median / max, per mesh size factor), the worst
+element quality, whether each geometry's cell count increases strictly with the mesh size
+factor, and whether any geometry exceeds the paper's 40,000-cell cap. Exit status 1 if either check fails.
 """
 
 from __future__ import annotations

@@ -4,8 +4,8 @@ Prints:
 - per-job overhead of the runner: a job whose solve exits at once (test-only fault switch
   ``exit:0``: the fork from the runner's fork server, classification, the store write of its
   rows), measured through the real runner; plus what a real job pays before its solve (the
-  solver-stack imports and loading the run; ~0 in a forked child, shown beside the cost in a
-  fresh interpreter); against the median wall time of a real demo job;
+  solver-stack imports and loading the run, in a forked child and in a fresh interpreter);
+  against the median wall time of a real demo job;
 - the store write alone for a real solver output (fields "final");
 - jobs per hour with 1 and with 2 workers on the same jobs (a fresh RUN_DIR each, after one
   warm-up job so both start from a warm JIT cache).
@@ -166,7 +166,7 @@ def main() -> int:
                 )
                 from woundsweep.config.manifest import load_run
                 from woundsweep.store.solverfile import read_solver_file
-                from woundsweep.store.writer import JobOutcome, Store
+                from woundsweep.store.writer import AttemptOutcome, Store
 
                 # Store write alone, for one real result re-solved to a scratch file.
                 run = load_run(rd)
@@ -180,7 +180,9 @@ def main() -> int:
                 if out.exists():
                     a, b = (int(x) for x in args.stages.split("-"))
                     so = read_solver_file(out, row["job_id"], (a, b))
-                    oc = JobOutcome("converged", "", 0, 1, 1.0, 1.0, 1.0, 1.0, None, 0.0, 1.0, so)
+                    oc = AttemptOutcome(
+                        "converged", "", 0, 1, 1.0, 1.0, 1.0, 1.0, None, 0.0, 1.0, so
+                    )
                     scratch = tmp_path / "scratch"
                     scratch.mkdir()
                     t0 = time.perf_counter()

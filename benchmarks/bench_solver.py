@@ -9,13 +9,11 @@ Prints, per geometry: cells, dofs, and per stage the Newton steps, load incremen
 time, the mean Jacobian assembly and MUMPS factorisation time per Newton step, and for the
 contact stages 4-6 the share of the stage's time spent in the contact terms (gaps, forces,
 tangent and insertion) and in contact detection (pair search, part of the former)
-and the maximal penetration relative to the element size (targets: detection < 20 % of a
-stage; all six stages of a median paper geometry < 30 s). A fourth
-mesh beyond the paper grid (mesh size factor 0.92) has about 24k dofs, the size of the
-issue's per-step target (<= 1.5 s per Newton step at 24k dofs; stages 1-3 of the largest
-paper geometry <= 30 s). The cold-cache JIT time compiles the solver's three forms into an
-empty temporary cache; then every job is checked to compile nothing (a spy on FFCx's
-compile step). Run it on an otherwise idle machine and compare figures within one run.
+and the maximal penetration relative to the element size. A fourth mesh is the large wedge
+at mesh size factor 0.92, beyond the paper grid's factors. The cold-cache JIT time compiles
+the solver's three forms into an empty temporary cache; then every job is checked to compile
+nothing (a spy on FFCx's compile step). Run it on an otherwise idle machine and compare
+figures within one run.
 """
 
 from __future__ import annotations
@@ -44,7 +42,7 @@ __all__ = ["main"]
 
 def geometries() -> list[tuple[str, GeometrySpec]]:
     """(name, spec): paper geometries across the cell-count range (the large one is near the
-    grid's largest, about 25k cells per benchmarks/bench_geometry.py), plus one finer mesh."""
+    grid's largest, per benchmarks/bench_geometry.py), plus one finer mesh."""
 
     def cyl(t_d: float, f_s: float, f_p: float, f_w: float, a: float, m: float) -> GeometrySpec:
         T = t_d * (1 + f_s)

@@ -20,8 +20,7 @@ scatter) and the form; then the stage-2 closure force the same way. It counts th
 2 and 4-6 within 5 % of f0 at the paper's factors, those also with a monotone fit that the
 scatter does not swamp, and those with a spread within 5 %. With three levels the finest
 triple's Richardson extrapolation replaces the fit. Not part of ``make bench``: with P2 it
-takes about an hour and a half on one core (87 minutes of solving, 53 of them job 8191,
-whose stage 4 at m = 2 runs to its iteration limit).
+takes more than an hour on one core.
 """
 
 from __future__ import annotations

@@ -23,7 +23,7 @@ from woundsweep.config.sweep import parse_sweep
 from woundsweep.core.diagnostics import StageReport
 from woundsweep.core.schema import ExitCode, FailureClass, StageResult, StageStatus
 from woundsweep.store.solverfile import SolverOutput
-from woundsweep.store.writer import JobOutcome, Store
+from woundsweep.store.writer import AttemptOutcome, Store
 
 __all__ = [
     "SMALL_SWEEP",
@@ -193,7 +193,7 @@ def write_results(run_dir: str | Path, rows: pd.DataFrame) -> None:
         converged = len(stages) == len(job) and all(
             s.status == StageStatus.CONVERGED for s in stages.values()
         )
-        outcome = JobOutcome(
+        outcome = AttemptOutcome(
             failure_class=(
                 FailureClass.CONVERGED if converged else FailureClass.NOT_CONVERGED
             ).value,

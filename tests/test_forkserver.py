@@ -23,7 +23,7 @@ import pytest
 from test_runner import WS, _make_run, _solve_processes
 
 from woundsweep.execution.forkserver import ForkServer, JobRequest
-from woundsweep.execution.jitlock import _may_compile
+from woundsweep.execution.jitlock import may_compile
 from woundsweep.execution.process import JOB_NAME, SERVER_NAME, kill_group
 
 pytestmark = pytest.mark.fem  # the server imports DOLFINx
@@ -145,9 +145,9 @@ def test_jit_locks_ignore_the_server_but_not_its_children(
     while "injecting hang" not in log.read_text():
         time.sleep(0.02)
     try:
-        assert _may_compile(Path(f"/proc/{pid}"), b"libffcx_forms_x", any_dolfinx=True)
-        assert not _may_compile(Path(f"/proc/{server.pid}"), b"libffcx_forms_x", True)
-        assert not _may_compile(Path(f"/proc/{pid}"), b"libffcx_forms_x", any_dolfinx=False)
+        assert may_compile(Path(f"/proc/{pid}"), b"libffcx_forms_x", any_dolfinx=True)
+        assert not may_compile(Path(f"/proc/{server.pid}"), b"libffcx_forms_x", True)
+        assert not may_compile(Path(f"/proc/{pid}"), b"libffcx_forms_x", any_dolfinx=False)
     finally:
         kill_group(pid)
         _wait(server, pid)

@@ -29,7 +29,7 @@ from woundsweep.execution.shards import estimate_cost
 from woundsweep.execution.summary import summarize
 from woundsweep.store.reader import STAGE_FIELDS, read_results
 from woundsweep.store.solverfile import read_solver_file
-from woundsweep.store.writer import JobOutcome, Store
+from woundsweep.store.writer import AttemptOutcome, Store
 
 ROOT = Path(__file__).resolve().parent.parent
 WS = [sys.executable, "-m", "woundsweep"]
@@ -95,9 +95,9 @@ def _solver_file(
     return results
 
 
-def _outcome(cls: str, output: Any = None, attempts: int = 1, cpu: float = 10.0) -> JobOutcome:
+def _outcome(cls: str, output: Any = None, attempts: int = 1, cpu: float = 10.0) -> AttemptOutcome:
     now = time.time()
-    return JobOutcome(
+    return AttemptOutcome(
         failure_class=cls,
         failure_detail="" if cls == "converged" else f"{cls} for the test",
         exit_code={"converged": 0, "not-converged": 3, "invalid": 2}.get(cls),

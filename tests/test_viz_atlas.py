@@ -107,7 +107,7 @@ def test_long_log_is_cut_to_its_end(run: Path, tmp_path: Path, monkeypatch) -> N
     log = tmp_path / "job.log"
     log.write_text("early line\n" + "x" * 5000 + "\nthe last line\n")
     monkeypatch.setattr(atlas_mod, "LOG_BYTES", 1000)
-    html = atlas_mod._log_html(log)
+    html = atlas_mod.log_html(log)
     assert (
         "the last line" in html and "early line" not in html and "the last 1 KiB of 5 KiB" in html
     )

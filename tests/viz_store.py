@@ -25,7 +25,7 @@ from woundsweep.core.diagnostics import StageReport
 from woundsweep.core.schema import ExitCode, FailureClass, StageStatus
 from woundsweep.mesh.cache import get_mesh
 from woundsweep.store.solverfile import read_solver_file, write_solver_file
-from woundsweep.store.writer import JobOutcome, Store
+from woundsweep.store.writer import AttemptOutcome, Store
 
 __all__ = ["SWEEP", "displacement", "make_store", "von_mises"]
 
@@ -69,8 +69,8 @@ def _row(stage: int, status: str, vm: np.ndarray | None, cells: int) -> dict:
     return r
 
 
-def _outcome(cls: str, out, code: int) -> JobOutcome:
-    return JobOutcome(cls, "", code, 1, 1.0, 1.0, 1.0, 1.0, None, 0.0, 1.0, out)
+def _outcome(cls: str, out, code: int) -> AttemptOutcome:
+    return AttemptOutcome(cls, "", code, 1, 1.0, 1.0, 1.0, 1.0, None, 0.0, 1.0, out)
 
 
 def make_store(run_dir: str | Path) -> Path:

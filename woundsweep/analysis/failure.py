@@ -29,6 +29,7 @@ from .settings import (
     MIN_FAILED_JOBS,
 )
 from .splits import geometry_groups, geometry_split
+from .training import dmatrix
 
 __all__ = ["FailureFit", "failure_matrix", "fit_failure", "job_table", "predict_failure"]
 
@@ -51,17 +52,11 @@ def failure_matrix(X: np.ndarray) -> np.ndarray:
     return X[:, [FEATURES.index(f) for f in JOB_FEATURES]]
 
 
-def _dmatrix(X: np.ndarray, y: np.ndarray | None = None, nthread: int = 2) -> Any:
-    import xgboost as xgb
-
-    return xgb.DMatrix(
-        X, label=y, feature_names=list(JOB_FEATURES), missing=np.nan, nthread=nthread
-    )
-
-
 def predict_failure(booster: Any, X: np.ndarray, nthread: int = 2) -> np.ndarray:
     """Failure probabilities of the jobs in ``X`` (`JOB_FEATURES` columns)."""
-    return np.asarray(booster.predict(_dmatrix(X, nthread=nthread)), dtype=np.float64)
+    return np.asarray(
+        booster.predict(dmatrix(X, nthread=nthread, features=JOB_FEATURES)), dtype=np.float64
+    )
 
 
 def fit_failure(
@@ -109,10 +104,11 @@ def fit_failure(
     nt = settings.nthread
     params = {**settings.xgb_params(), "objective": "binary:logistic", "eval_metric": "logloss"}
     del params["num_class"]
-    dtrain = _dmatrix(X[split.train], failed[split.train], nt)
+    dtrain = dmatrix(X[split.train], failed[split.train], nt, JOB_FEATURES)
+    dval = dmatrix(X[split.validation], failed[split.validation], nt, JOB_FEATURES)
     booster = xgb.train(
         params, dtrain, num_boost_round=settings.n_estimators,
-        evals=[(dtrain, "train"), (_dmatrix(X[split.validation], failed[split.validation], nt), "validation")],
+        evals=[(dtrain, "train"), (dval, "validation")],
         early_stopping_rounds=settings.early_stopping_rounds, verbose_eval=False,
     )  # fmt: skip
     best = int(getattr(booster, "best_iteration", booster.num_boosted_rounds() - 1))

@@ -24,6 +24,7 @@ from .conformal import calibrate, coverage
 from .evaluation import feature_importance, shap_importance
 from .settings import COVERAGE_LEVELS, FEATURES, STRESS
 from .splits import geometry_groups, geometry_split
+from .training import dmatrix
 
 __all__ = ["SurrogateFit", "SurrogateSplit", "fit_surrogate", "predict_log", "surrogate_split"]
 
@@ -62,15 +63,9 @@ def surrogate_split(groups: np.ndarray, settings: ModelSettings) -> SurrogateSpl
     )
 
 
-def _dmatrix(X: np.ndarray, y: np.ndarray | None = None, nthread: int = 2) -> Any:
-    import xgboost as xgb
-
-    return xgb.DMatrix(X, label=y, feature_names=list(FEATURES), missing=np.nan, nthread=nthread)
-
-
 def predict_log(booster: Any, X: np.ndarray, nthread: int = 2) -> np.ndarray:
     """The surrogate's log p99 (log kPa) for the rows of ``X``, float64."""
-    return np.asarray(booster.predict(_dmatrix(X, nthread=nthread)), dtype=np.float64)
+    return np.asarray(booster.predict(dmatrix(X, nthread=nthread)), dtype=np.float64)
 
 
 def _params(settings: ModelSettings) -> dict[str, Any]:
@@ -94,8 +89,8 @@ def fit_surrogate(rows: pd.DataFrame, X: np.ndarray, settings: ModelSettings) ->
                 f"stress surrogate: empty {name} set from {len(rows)} rows; too few geometries"
             )
     nt = settings.nthread
-    dtrain = _dmatrix(X[split.train], y[split.train], nt)
-    dstop = _dmatrix(X[split.stop], y[split.stop], nt)
+    dtrain = dmatrix(X[split.train], y[split.train], nt)
+    dstop = dmatrix(X[split.stop], y[split.stop], nt)
     log: dict[str, dict[str, list[float]]] = {}
     booster = xgb.train(
         _params(settings), dtrain, num_boost_round=settings.n_estimators,
@@ -129,7 +124,7 @@ def fit_surrogate(rows: pd.DataFrame, X: np.ndarray, settings: ModelSettings) ->
         },
         "importance": {
             **feature_importance(booster),
-            "shap": shap_importance(booster, _dmatrix(X, nthread=nt)),
+            "shap": shap_importance(booster, dmatrix(X, nthread=nt)),
         },
     }
     meta = {

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -10,7 +11,7 @@ from ..config.analysis import ModelSettings
 from .settings import FEATURES
 from .splits import Split
 
-__all__ = ["Trained", "predict_proba", "train_model"]
+__all__ = ["Trained", "dmatrix", "predict_proba", "train_model"]
 
 
 class Trained(NamedTuple):
@@ -22,18 +23,24 @@ class Trained(NamedTuple):
     eval_log: dict[str, dict[str, list[float]]]
 
 
-def _dmatrix(X: np.ndarray, y: np.ndarray | None = None, nthread: int = 2) -> Any:
+def dmatrix(
+    X: np.ndarray,
+    y: np.ndarray | None = None,
+    nthread: int = 2,
+    features: Sequence[str] = FEATURES,
+) -> Any:
+    """An ``xgboost.DMatrix`` of ``X`` (columns named ``features``, NaN missing), labels ``y``."""
     import xgboost as xgb
 
-    return xgb.DMatrix(X, label=y, feature_names=list(FEATURES), missing=np.nan, nthread=nthread)
+    return xgb.DMatrix(X, label=y, feature_names=list(features), missing=np.nan, nthread=nthread)
 
 
 def train_model(X: np.ndarray, y: np.ndarray, split: Split, settings: ModelSettings) -> Trained:
     """Boost on the training rows, stop early on the validation log loss."""
     import xgboost as xgb
 
-    dtrain = _dmatrix(X[split.train], y[split.train], settings.nthread)
-    dval = _dmatrix(X[split.validation], y[split.validation], settings.nthread)
+    dtrain = dmatrix(X[split.train], y[split.train], settings.nthread)
+    dval = dmatrix(X[split.validation], y[split.validation], settings.nthread)
     log: dict[str, dict[str, list[float]]] = {}
     booster = xgb.train(
         settings.xgb_params(),
@@ -52,5 +59,5 @@ def train_model(X: np.ndarray, y: np.ndarray, split: Split, settings: ModelSetti
 
 def predict_proba(booster: Any, X: np.ndarray, nthread: int = 2) -> np.ndarray:
     """Class probabilities (rows x q), renormalised in float64 (XGBoost sums in float32)."""
-    prob = np.asarray(booster.predict(_dmatrix(X, nthread=nthread)), dtype=np.float64)
+    prob = np.asarray(booster.predict(dmatrix(X, nthread=nthread)), dtype=np.float64)
     return prob / prob.sum(axis=1, keepdims=True)

@@ -41,11 +41,8 @@ def stale_results(run_dir: Path, sweep, manifest: pd.DataFrame) -> tuple[int, in
 
     Reads only the footer records (cheap), so damaged files count as neither.
     """
-    import pyarrow.parquet as pq
-
-    from ..core.versions import RESULT_FORMAT_VERSION
     from ..store.identity import fingerprints
-    from ..store.reader import META_KEY, result_files
+    from ..store.reader import read_footer, result_files, stale_reason
 
     files, _ = result_files(run_dir)
     if not files:
@@ -56,11 +53,8 @@ def stale_results(run_dir: Path, sweep, manifest: pd.DataFrame) -> tuple[int, in
         if jid not in expected:
             orphans += 1
             continue
-        try:
-            meta = json.loads((pq.read_schema(p).metadata or {})[META_KEY])
-        except Exception:  # noqa: BLE001 - damaged: `run` moves it aside
-            continue
-        if meta.get("format") != RESULT_FORMAT_VERSION or meta.get("fingerprint") != expected[jid]:
+        meta = read_footer(p)  # None: damaged, `run` moves it aside
+        if meta is not None and stale_reason(meta, expected[jid]):
             stale += 1
     return stale, orphans
 

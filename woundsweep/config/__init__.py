@@ -7,40 +7,20 @@ from __future__ import annotations
 
 from ..core.lazy import lazy_exports
 
-__all__ = [
-    "ClosureZone",
-    "FungParameters",
-    "GeometrySpec",
-    "Materials",
-    "ModelSettings",
-    "MooneyRivlinParameters",
-    "NewtonSettings",
-    "Run",
-    "SolverSettings",
-    "StageSettings",
-    "Sweep",
-    "expand",
-    "load_run",
-    "load_sweep",
-    "parse_sweep",
-]
-
-_HOME = {
-    "ClosureZone": "paper",
-    "FungParameters": "paper",
-    "Materials": "paper",
-    "MooneyRivlinParameters": "paper",
-    "StageSettings": "paper",
-    "NewtonSettings": "solver",
-    "SolverSettings": "solver",
-    "ModelSettings": "analysis",
-    "GeometrySpec": "geometry",
-    "Sweep": "sweep",
-    "load_sweep": "sweep",
-    "parse_sweep": "sweep",
-    "Run": "manifest",
-    "expand": "manifest",
-    "load_run": "manifest",
-}
-
-__getattr__, __dir__ = lazy_exports(__name__, _HOME)
+__all__, __getattr__, __dir__ = lazy_exports(
+    __name__,
+    {
+        "paper": (
+            "ClosureZone",
+            "FungParameters",
+            "Materials",
+            "MooneyRivlinParameters",
+            "StageSettings",
+        ),
+        "solver": ("NewtonSettings", "SolverSettings"),
+        "analysis": ("ModelSettings",),
+        "geometry": ("GeometrySpec",),
+        "sweep": ("Sweep", "load_sweep", "parse_sweep"),
+        "manifest": ("Run", "expand", "load_run"),
+    },
+)

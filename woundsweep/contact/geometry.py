@@ -5,14 +5,16 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["orient_outward", "owning_cells", "split_wound_flanks"]
+__all__ = ["face_keys", "orient_outward", "owning_cells", "split_wound_flanks"]
 
 
 def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.einsum("...i,...i->...", a, b)
 
 
-def _face_keys(tri: np.ndarray, n: int) -> np.ndarray:
+def face_keys(tri: np.ndarray, n: int) -> np.ndarray:
+    """One int64 key per triangle (k, 3) of point indices below ``n``, whatever its vertex
+    order: equal keys, same face."""
     t = np.sort(np.asarray(tri, dtype=np.int64), axis=1)
     return (t[:, 0] * n + t[:, 1]) * n + t[:, 2]
 
@@ -23,9 +25,9 @@ def owning_cells(cells: np.ndarray, facets: np.ndarray, n_points: int) -> np.nda
     faces = np.concatenate([cells[:, [1, 2, 3]], cells[:, [0, 2, 3]], cells[:, [0, 1, 3]],
                             cells[:, [0, 1, 2]]])  # fmt: skip
     owner = np.tile(np.arange(len(cells)), 4)
-    keys = _face_keys(faces, n_points)
+    keys = face_keys(faces, n_points)
     order = np.argsort(keys)
-    want = _face_keys(facets, n_points)
+    want = face_keys(facets, n_points)
     pos = np.minimum(np.searchsorted(keys, want, sorter=order), len(order) - 1)
     if not np.all(keys[order[pos]] == want):
         raise ValueError("a boundary facet is not a face of any cell")

@@ -43,7 +43,7 @@ from scipy.spatial import cKDTree
 
 from .implicit import pair_terms
 from .protocol import ContactSummary
-from .surfaces import lumped_area, surface
+from .surfaces import lumped_area, surface, triangle_areas
 
 __all__ = ["PATTERN_GAP", "PATTERN_MARGIN", "TWO_PASS_WEIGHT", "FlankContact"]
 
@@ -127,8 +127,7 @@ class FlankContact:
         for i in (0, 1):
             sl, ms = surfs[i], surfs[1 - i]
             keep = ~np.isin(sl.nodes, shared)
-            p = self.X[ms.facets]
-            m_area = 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
+            m_area = triangle_areas(self.X[ms.facets])
             rho = radius_factor * np.sqrt(4.0 * m_area / np.sqrt(3.0))
             size = sl.size_mm[keep]
             passes.append(

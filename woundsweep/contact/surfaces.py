@@ -6,7 +6,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-__all__ = ["Surface", "lumped_area", "surface"]
+__all__ = ["Surface", "lumped_area", "surface", "triangle_areas"]
 
 
 class Surface(NamedTuple):
@@ -17,10 +17,14 @@ class Surface(NamedTuple):
     size_mm: np.ndarray  # (ns,) element size at each node (mean over its facets)
 
 
+def triangle_areas(p: np.ndarray) -> np.ndarray:
+    """Areas of triangles given as (k, 3, 3) vertex coordinates."""
+    return 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
+
+
 def surface(X: np.ndarray, facets: np.ndarray) -> Surface:
     """The surface of outward-oriented ``facets`` with the element size at each node."""
-    p = X[facets]
-    area = 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
+    area = triangle_areas(X[facets])
     nodes, inv = np.unique(facets.ravel(), return_inverse=True)
     tri_area = np.bincount(inv, weights=np.repeat(area, 3), minlength=len(nodes))
     count = np.bincount(inv, minlength=len(nodes))
@@ -30,7 +34,6 @@ def surface(X: np.ndarray, facets: np.ndarray) -> Surface:
 
 def lumped_area(X: np.ndarray, facets: np.ndarray, nodes: np.ndarray) -> np.ndarray:
     """A third of the reference area of the facets around each of ``nodes`` (mm^2)."""
-    p = X[facets]
-    area = 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
+    area = triangle_areas(X[facets])
     per_node = np.bincount(facets.ravel(), weights=np.repeat(area / 3.0, 3), minlength=len(X))
     return per_node[nodes]

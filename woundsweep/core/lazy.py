@@ -4,17 +4,18 @@ importing a package stays cheap (no DOLFINx, gmsh, XGBoost or matplotlib until n
 from __future__ import annotations
 
 import importlib
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from typing import Any
 
 __all__ = ["lazy_exports"]
 
 
 def lazy_exports(
-    package: str, home: Mapping[str, str]
-) -> tuple[Callable[[str], Any], Callable[[], list[str]]]:
-    """``__getattr__`` and ``__dir__`` for ``package`` whose names live in the submodules
-    ``home[name]``."""
+    package: str, homes: Mapping[str, Iterable[str]]
+) -> tuple[list[str], Callable[[str], Any], Callable[[], list[str]]]:
+    """``__all__``, ``__getattr__`` and ``__dir__`` for ``package`` whose submodule
+    ``module`` defines the names ``homes[module]``."""
+    home = {name: module for module, names in homes.items() for name in names}
 
     def __getattr__(name: str) -> Any:
         module = home.get(name)
@@ -25,4 +26,4 @@ def lazy_exports(
     def __dir__() -> list[str]:
         return sorted(set(home) | set(vars(importlib.import_module(package))))
 
-    return __getattr__, __dir__
+    return sorted(home), __getattr__, __dir__

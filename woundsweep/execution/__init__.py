@@ -8,28 +8,12 @@ from __future__ import annotations
 
 from ..core.lazy import lazy_exports
 
-__all__ = [
-    "JobRequest",
-    "RunOptions",
-    "Shard",
-    "estimate_cost",
-    "parse_shard",
-    "partition",
-    "run_shard",
-    "shard_jobs",
-    "summarize",
-]
-
-_HOME = {
-    "JobRequest": "forkserver",
-    "RunOptions": "runner",
-    "run_shard": "runner",
-    "Shard": "shards",
-    "estimate_cost": "shards",
-    "parse_shard": "shards",
-    "partition": "shards",
-    "shard_jobs": "shards",
-    "summarize": "summary",
-}
-
-__getattr__, __dir__ = lazy_exports(__name__, _HOME)
+__all__, __getattr__, __dir__ = lazy_exports(
+    __name__,
+    {
+        "forkserver": ("JobRequest",),
+        "runner": ("RunOptions", "run_shard"),
+        "shards": ("Shard", "estimate_cost", "parse_shard", "partition", "shard_jobs"),
+        "summary": ("summarize",),
+    },
+)

@@ -27,6 +27,7 @@ __all__ = [
     "clear_stale_jit_locks",
     "jit_cache_dir",
     "lock_state",
+    "may_compile",
     "pending_jit_locks",
 ]
 
@@ -80,7 +81,7 @@ def _is_local_fs(path: Path) -> bool:
     return bool(fstype) and not any(t in fstype for t in _SHARED_FS)
 
 
-def _may_compile(proc: Path, stem: bytes, any_dolfinx: bool) -> bool:
+def may_compile(proc: Path, stem: bytes, any_dolfinx: bool) -> bool:
     """Could process ``proc`` (its /proc directory) be compiling the module ``stem``?
 
     A C compiler whose command line names the module, or (``any_dolfinx``) any process with
@@ -100,10 +101,10 @@ def _may_compile(proc: Path, stem: bytes, any_dolfinx: bool) -> bool:
 
 
 def _compiling_here(lock: Path, any_dolfinx: bool = False) -> bool:
-    """Could a process on this host be compiling the module of ``lock`` (`_may_compile`)?"""
+    """Could a process on this host be compiling the module of ``lock`` (`may_compile`)?"""
     me = str(os.getpid())
     return any(
-        _may_compile(d, lock.stem.encode(), any_dolfinx)
+        may_compile(d, lock.stem.encode(), any_dolfinx)
         for d in Path("/proc").iterdir()
         if d.name.isdigit() and d.name != me
     )

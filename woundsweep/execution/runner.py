@@ -38,7 +38,7 @@ from ..config.manifest import load_run
 from ..core.errors import StoreError, WoundsweepError
 from ..core.faults import ATTEMPT_ENV
 from ..core.schema import FailureClass
-from ..store.writer import JobOutcome, Store
+from ..store.writer import AttemptOutcome, Store
 from .classify import TRANSIENT_CLASSES, classify
 from .forkserver import ForkServer, JobRequest
 from .jitlock import break_lock, clear_stale_jit_locks, jit_cache_dir, lock_state
@@ -167,7 +167,7 @@ class _Runner:
         self.running.clear()
 
     # -- finishing -----------------------------------------------------------------------
-    def finish(self, att: Attempt, status: int, usage: Any) -> JobOutcome | None:
+    def finish(self, att: Attempt, status: int, usage: Any) -> AttemptOutcome | None:
         """Classify; returns the outcome to store, or None when the job is retried."""
         job = att.job
         end = time.time()
@@ -196,7 +196,7 @@ class _Runner:
             job.wait_for_lock = att.extra.get("jit_lock")
             return None
         code = os.WEXITSTATUS(status) if os.WIFEXITED(status) and not att.killed_for else None
-        return JobOutcome(
+        return AttemptOutcome(
             failure_class=cls.failure_class,
             failure_detail=cls.detail,
             exit_code=code,
@@ -228,7 +228,7 @@ class _Runner:
         return False
 
 
-def _store(store: Store, row: dict[str, Any], outcome: JobOutcome, opts: RunOptions) -> None:
+def _store(store: Store, row: dict[str, Any], outcome: AttemptOutcome, opts: RunOptions) -> None:
     """Write the job; output that validated but cannot be stored makes it ``crashed``."""
     try:
         store.write_job(row, outcome, opts.stages, opts.fields, str(opts.shard))

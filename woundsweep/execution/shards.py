@@ -17,17 +17,11 @@ from typing import Any, NamedTuple
 import numpy as np
 import pandas as pd
 
-from ..config.sweep import GEOMETRY_KEYS
+from ..config.sweep import DERIVED, GEOMETRY_KEYS
 from ..core.errors import WoundsweepError
 
-_SPEC_COLUMNS = (
-    "subcutis_thickness_mm",
-    "total_thickness_mm",
-    "patch_half_length_mm",
-    "wound_width_mm",
-    "wound_depth_mm",
-    "job_index",
-)
+# The manifest columns a geometry's cost estimate reads besides GEOMETRY_KEYS.
+_SPEC_COLUMNS = (*DERIVED, "job_index")
 
 __all__ = ["Shard", "estimate_cost", "parse_shard", "partition", "shard_jobs"]
 

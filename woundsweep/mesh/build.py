@@ -34,9 +34,9 @@ from ..core.schema import (
     Y_MAX,
     Y_MIN,
 )
-from .sizing import MESH_LAW_VERSION, SIZE_LAW, _size_scale, _wound_size, mesh_size_mm
+from .sizing import MESH_LAW_VERSION, SIZE_LAW, mesh_size_mm, size_scale, wound_size
 
-__all__ = ["MeshData", "build_mesh"]
+__all__ = ["MeshData", "build_mesh", "signed_volumes"]
 
 
 class MeshData(NamedTuple):
@@ -314,7 +314,8 @@ def _mirror(
     )
 
 
-def _signed_volumes(points: np.ndarray, cells: np.ndarray) -> np.ndarray:
+def signed_volumes(points: np.ndarray, cells: np.ndarray) -> np.ndarray:
+    """The signed volume of each tetrahedron (negative where its vertices are left-handed)."""
     p = points[cells]
     return (
         np.einsum("ij,ij->i", np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), p[:, 3] - p[:, 0])
@@ -355,7 +356,7 @@ def build_mesh(spec: GeometrySpec) -> MeshData:
     points, cells, facets = points[used], renumber[cells], renumber[facets]
     if (facets < 0).any():
         raise GeometryError(f"{spec.describe()}: a boundary facet uses a node of no cell")
-    vol = _signed_volumes(points, cells)
+    vol = signed_volumes(points, cells)
     flip = vol < 0
     cells[flip] = cells[flip][:, [1, 0, 2, 3]]
     vol = np.abs(vol)
@@ -363,7 +364,7 @@ def build_mesh(spec: GeometrySpec) -> MeshData:
         raise GeometryError(
             f"{spec.describe()}: degenerate or inverted cell (min SICN {min_q:.3g})"
         )
-    s = _size_scale(spec.mesh_size_factor, spec.element_degree)
+    s = size_scale(spec.mesh_size_factor, spec.element_degree)
     info = {
         "cells": int(len(cells)),
         "vertices": int(len(points)),
@@ -373,7 +374,7 @@ def build_mesh(spec: GeometrySpec) -> MeshData:
         "build_time_s": time.perf_counter() - start,
         "mesh_law_version": MESH_LAW_VERSION,
         "size_scale": s,
-        "wound_size_mm": s * _wound_size(spec),
+        "wound_size_mm": s * wound_size(spec),
         "dermis_size_mm": s * SIZE_LAW["layer_per_dermis"] * spec.dermal_thickness_mm,
         "size_law": dict(SIZE_LAW),
         "closure_zone": {

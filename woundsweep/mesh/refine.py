@@ -15,7 +15,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from .build import MeshData, _signed_volumes
+from .build import MeshData, signed_volumes
 
 __all__ = ["refine_uniform"]
 
@@ -72,7 +72,7 @@ def refine_uniform(mesh: MeshData) -> MeshData:
     children positively oriented; ``info`` copied with the new cell count)."""
     points, mid, midpoint = _midpoints(mesh.points, mesh.cells)
     cells = _children(points, mesh.cells, mid).reshape(-1, 4)
-    flip = _signed_volumes(points, cells) < 0
+    flip = signed_volumes(points, cells) < 0
     cells[flip] = cells[flip][:, [1, 0, 2, 3]]
     a, b, c = mesh.facets.T
     ab, bc, ca = midpoint(a, b), midpoint(b, c), midpoint(c, a)

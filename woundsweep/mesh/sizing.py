@@ -34,7 +34,14 @@ from types import MappingProxyType
 from ..config.geometry import GeometrySpec, wound_distance_mm
 from ..core.versions import MESH_LAW_VERSION
 
-__all__ = ["MESH_LAW_VERSION", "PAPER_CELL_CAP", "SIZE_LAW", "mesh_size_mm"]
+__all__ = [
+    "MESH_LAW_VERSION",
+    "PAPER_CELL_CAP",
+    "SIZE_LAW",
+    "mesh_size_mm",
+    "size_scale",
+    "wound_size",
+]
 
 # The paper omitted models above 40,000 (P1) cells; the size law keeps every paper geometry
 # below, and a P2 mesh of the same geometry has fewer cells for about as many nodes.
@@ -56,12 +63,14 @@ SIZE_LAW: Mapping[str, float] = MappingProxyType(
 )
 
 
-def _size_scale(mesh_size_factor: float, element_degree: int = 1) -> float:
+def size_scale(mesh_size_factor: float, element_degree: int = 1) -> float:
+    """``p * s`` of the size law: the factor that scales every length of the size field."""
     factor = (SIZE_LAW["reference_factor"] / mesh_size_factor) ** SIZE_LAW["factor_exponent"]
     return element_degree * factor
 
 
-def _wound_size(spec: GeometrySpec) -> float:
+def wound_size(spec: GeometrySpec) -> float:
+    """``h_w`` of the size law (mm): the edge length at the wound before `size_scale`."""
     return min(
         SIZE_LAW["wound_per_dermis"] * spec.dermal_thickness_mm,
         SIZE_LAW["wound_per_width"] * spec.wound_width_mm,
@@ -74,9 +83,9 @@ def mesh_size_mm(spec: GeometrySpec, x: float, y: float, z: float) -> float:
     t_d = spec.dermal_thickness_mm
     dist = wound_distance_mm(spec, x, z)
     zeta = max(0.0, -z - t_d) / t_d
-    near = _wound_size(spec) + SIZE_LAW["wound_growth"] * dist
+    near = wound_size(spec) + SIZE_LAW["wound_growth"] * dist
     layer = (SIZE_LAW["layer_per_dermis"] * t_d + SIZE_LAW["layer_growth"] * dist) * (
         1.0 + SIZE_LAW["depth_growth"] * zeta
     )
     cap = SIZE_LAW["patch_fraction"] * spec.patch_half_length_mm
-    return _size_scale(spec.mesh_size_factor, spec.element_degree) * min(near, layer, cap)
+    return size_scale(spec.mesh_size_factor, spec.element_degree) * min(near, layer, cap)

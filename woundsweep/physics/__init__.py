@@ -8,30 +8,14 @@ from __future__ import annotations
 
 from ..core.lazy import lazy_exports
 
-__all__ = [
-    "Fung",
-    "JobMaterials",
-    "MooneyRivlin",
-    "StageOutcome",
-    "WoundDomain",
-    "WoundForms",
-    "WoundModel",
-    "WoundProblem",
-    "run_stages",
-    "solve_job",
-]
-
-_LAZY = {
-    "WoundDomain": "domain",
-    "Fung": "materials",
-    "JobMaterials": "materials",
-    "MooneyRivlin": "materials",
-    "WoundForms": "forms",
-    "WoundProblem": "problem",
-    "StageOutcome": "stages",
-    "WoundModel": "stages",
-    "run_stages": "job",
-    "solve_job": "job",
-}
-
-__getattr__, __dir__ = lazy_exports(__name__, _LAZY)
+__all__, __getattr__, __dir__ = lazy_exports(
+    __name__,
+    {
+        "domain": ("WoundDomain",),
+        "materials": ("Fung", "JobMaterials", "MooneyRivlin"),
+        "forms": ("WoundForms",),
+        "problem": ("WoundProblem",),
+        "stages": ("StageOutcome", "WoundModel"),
+        "job": ("run_stages", "solve_job"),
+    },
+)

@@ -24,6 +24,8 @@ import ufl
 from mpi4py import MPI
 from petsc4py import PETSc
 
+from ..contact.geometry import face_keys
+
 __all__ = [
     "DOLFINX_VERSION",
     "assemble_matrix",
@@ -38,6 +40,7 @@ __all__ = [
     "dg0_space",
     "evaluate_expression",
     "facet_meshtags",
+    "jit_defaults",
     "jit_options",
     "mesh_from_arrays",
     "node_input_index",
@@ -110,11 +113,6 @@ def cell_input_index(mesh: Any) -> np.ndarray:
     return np.asarray(mesh.topology.original_cell_index, dtype=np.int64)[: num_cells(mesh)]
 
 
-def _sorted_keys(tri: np.ndarray, n: int) -> np.ndarray:
-    t = np.sort(np.asarray(tri, dtype=np.int64), axis=1)
-    return (t[:, 0] * n + t[:, 1]) * n + t[:, 2]
-
-
 def facet_meshtags(mesh: Any, facets: np.ndarray, values: np.ndarray) -> Any:
     """MeshTags on the facets given as triangles of input point indices (k, 3)."""
     facets = np.asarray(facets, dtype=np.int64).reshape(-1, 3)
@@ -126,9 +124,9 @@ def facet_meshtags(mesh: Any, facets: np.ndarray, values: np.ndarray) -> Any:
     f2v = _connectivity(mesh, fdim, 0, 3)
     inp = vertex_input_index(mesh)
     n = int(max(inp.max(initial=0), facets.max(initial=0))) + 1
-    mesh_keys = _sorted_keys(inp[f2v], n)
+    mesh_keys = face_keys(inp[f2v], n)
     order = np.argsort(mesh_keys)
-    want = _sorted_keys(facets, n)
+    want = face_keys(facets, n)
     pos = np.searchsorted(mesh_keys, want, sorter=order)
     pos = np.minimum(pos, len(order) - 1)
     found = mesh_keys[order[pos]] == want
@@ -228,7 +226,8 @@ def petsc_vec(u: Any) -> PETSc.Vec:
 KERNEL_CFLAGS = ("-O3", "-g0", "-fno-math-errno", "-funsafe-math-optimizations")
 
 
-def _jit_defaults() -> dict[str, Any]:
+def jit_defaults() -> dict[str, Any]:
+    """DOLFINx's default JIT options ({} if this version has no such table)."""
     import dolfinx.jit
 
     for name in ("DOLFINX_DEFAULT_JIT_OPTIONS", "DOLFINX_DEFAULT_JIT_PARAMETERS"):
@@ -242,7 +241,7 @@ def jit_options(cache_dir: str | Path | None = None, timeout_s: int = 900) -> di
     """JIT options: a long lock timeout so concurrent jobs wait for one compile, not fail, and
     `KERNEL_CFLAGS` where this DOLFINx takes compiler arguments."""
     opts: dict[str, Any] = {"timeout": int(timeout_s)}
-    if "cffi_extra_compile_args" in _jit_defaults():
+    if "cffi_extra_compile_args" in jit_defaults():
         opts["cffi_extra_compile_args"] = list(KERNEL_CFLAGS)
     if cache_dir is not None:
         opts["cache_dir"] = str(cache_dir)

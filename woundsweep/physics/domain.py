@@ -20,6 +20,7 @@ import numpy as np
 from ..config.paper import ClosureZone
 from ..config.solver import DEGREES, SolverSettings
 from ..contact.geometry import owning_cells
+from ..contact.surfaces import triangle_areas
 from ..core.schema import (
     BOTTOM,
     DERMIS,
@@ -50,11 +51,6 @@ LATERAL_DERMIS, LATERAL_SUBCUTIS, ZONE_LEFT, ZONE_RIGHT = 101, 102, 103, 104
 def dof_rows(nodes: Any, comp: int) -> np.ndarray:
     """Flat dof indices of component ``comp`` of ``nodes``."""
     return (3 * np.asarray(nodes, dtype=np.int64) + comp).astype(np.int32)
-
-
-def _areas(p: np.ndarray) -> np.ndarray:
-    """Areas of triangles given as (k, 3, 3) vertex coordinates."""
-    return 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
 
 
 class WoundDomain:
@@ -173,7 +169,7 @@ class WoundDomain:
         lateral = np.flatnonzero(np.isin(ftags, (X_MIN, X_MAX, Y_MIN, Y_MAX)))
         owner = owning_cells(self.cells, facets[lateral], len(self.points))
         layer = np.where(self.cell_tags[owner] == DERMIS, LATERAL_DERMIS, LATERAL_SUBCUTIS)
-        area = _areas(self.points[facets[lateral]])
+        area = triangle_areas(self.points[facets[lateral]])
         on_xmax = ftags[lateral] == X_MAX
         self.x_max_area = {
             DERMIS: float(area[on_xmax & (layer == LATERAL_DERMIS)].sum()),
@@ -236,7 +232,7 @@ class WoundDomain:
         tri = self.zone_left_facets if side == "left" else self.zone_right_facets
         if len(tri) == 0:
             return 0.0
-        return float(_areas((self.X + u.reshape(-1, 3))[tri]).sum())
+        return float(triangle_areas((self.X + u.reshape(-1, 3))[tri]).sum())
 
     def closure_gap(self, u: np.ndarray) -> float:
         """Widest x-opening between the flanks in the closure zone (mm, deformed; NaN if no zone).

@@ -44,6 +44,7 @@ __all__ = [
     "JobOutcome",
     "NotConvergedError",
     "StageRecord",
+    "interpenetration_flag",
     "job_model",
     "run_stages",
     "solve_job",
@@ -153,7 +154,7 @@ def _finite(x: float | int | None) -> float | int | None:
     return x if isinstance(x, int) else float(x)
 
 
-def _interpenetrating(stage: int, gap: float | None) -> int | None:
+def interpenetration_flag(stage: int, gap: float | None) -> int | None:
     """The stage-3 flag: 1 if the closure gap is negative (the flanks overlap), else 0; None
     for the other stages and for a gap that is not a number."""
     if stage != 3 or gap is None or not math.isfinite(gap):
@@ -211,7 +212,7 @@ def run_stages(
             newton_iterations=int(s.iterations),
             time_s=float(out.time_s),
             closure_gap_mm=_finite(gap) if gap is not None else None,
-            interpenetrating=_interpenetrating(k, gap),
+            interpenetrating=interpenetration_flag(k, gap),
             min_J=_finite(min_J),
             residual_norm=_finite(s.residual_norm),
             dofs=dofs,

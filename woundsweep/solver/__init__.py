@@ -10,23 +10,11 @@ from __future__ import annotations
 from ..config.solver import NewtonSettings
 from ..core.lazy import lazy_exports
 
-__all__ = [
-    "ContinuationResult",
-    "LoadState",
-    "NewtonResult",
-    "NewtonSettings",
-    "NewtonSolver",
-    "NonlinearProblem",
-    "Policy",
-]
-
-_LAZY = {
-    "ContinuationResult": "continuation",
-    "LoadState": "continuation",
-    "NewtonResult": "newton",
-    "NewtonSolver": "newton",
-    "NonlinearProblem": "newton",
-    "Policy": "newton",
-}
-
-__getattr__, __dir__ = lazy_exports(__name__, _LAZY)
+__all__, __getattr__, __dir__ = lazy_exports(
+    __name__,
+    {
+        "continuation": ("ContinuationResult", "LoadState"),
+        "newton": ("NewtonResult", "NewtonSolver", "NonlinearProblem", "Policy"),
+    },
+)
+__all__ += ["NewtonSettings"]

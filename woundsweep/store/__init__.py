@@ -7,24 +7,12 @@ from __future__ import annotations
 
 from ..core.lazy import lazy_exports
 
-__all__ = [
-    "Store",
-    "check_result",
-    "read_results",
-    "read_solver_file",
-    "result_fingerprint",
-    "scan_store",
-    "write_solver_file",
-]
-
-_HOME = {
-    "result_fingerprint": "identity",
-    "read_solver_file": "solverfile",
-    "write_solver_file": "solverfile",
-    "check_result": "reader",
-    "read_results": "reader",
-    "scan_store": "reader",
-    "Store": "writer",
-}
-
-__getattr__, __dir__ = lazy_exports(__name__, _HOME)
+__all__, __getattr__, __dir__ = lazy_exports(
+    __name__,
+    {
+        "identity": ("result_fingerprint",),
+        "solverfile": ("read_solver_file", "write_solver_file"),
+        "reader": ("check_result", "read_results", "scan_store"),
+        "writer": ("Store",),
+    },
+)

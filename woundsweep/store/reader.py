@@ -40,11 +40,13 @@ __all__ = [
     "check_files",
     "check_result",
     "content_digest",
+    "read_footer",
     "read_results",
     "result_files",
     "result_schema",
     "scan_results",
     "scan_store",
+    "stale_reason",
     "validate_result_file",
 ]
 
@@ -115,7 +117,7 @@ def result_schema() -> pa.Schema:
     return pa.schema(fields)
 
 
-def _footer(path: Path) -> dict[str, Any] | None:
+def read_footer(path: Path) -> dict[str, Any] | None:
     """The footer record alone (cheap: the Parquet footer), or None if it cannot be read."""
     try:
         raw = (pq.read_schema(path).metadata or {}).get(META_KEY)
@@ -123,6 +125,16 @@ def _footer(path: Path) -> dict[str, Any] | None:
     except Exception:  # noqa: BLE001 - damaged files are the full validator's to name
         return None
     return meta if isinstance(meta, dict) else None
+
+
+def stale_reason(meta: Mapping[str, Any], fingerprint: str | None = None) -> str:
+    """Why the result with footer record ``meta`` is stale: written in another result format,
+    or computed with other settings than ``fingerprint`` (if given); "" if it is neither."""
+    if meta.get("format") != RESULT_FORMAT_VERSION:
+        return f"written in result format {meta.get('format')!r}"
+    if fingerprint is not None and meta.get("fingerprint") != fingerprint:
+        return "computed with other settings (fingerprint differs)"
+    return ""
 
 
 def validate_result_file(
@@ -209,17 +221,17 @@ def check_result(
 ) -> ResultCheck:
     """Sort one result file: corrupt (the Parquet file), stale (another result format or
     another fingerprint than ``fingerprint``), damaged (its fields or mesh file), or done."""
-    footer = _footer(path) if path.is_file() else None
-    if footer is not None and footer.get("format") != RESULT_FORMAT_VERSION:
-        return ResultCheck("stale", f"written in result format {footer.get('format')!r}")
+    footer = read_footer(path) if path.is_file() else None
+    if footer is not None and (reason := stale_reason(footer)):
+        return ResultCheck("stale", reason)
     try:
         meta = validate_result_file(path, job_id, run_dir, verify_files=False)
     except FilesDamaged as err:  # the Parquet file is whole: its fields or mesh file is not
-        return ResultCheck("damaged", str(err), _footer(path))
+        return ResultCheck("damaged", str(err), read_footer(path))
     except StoreError as err:
         return ResultCheck("corrupt", str(err))
-    if fingerprint is not None and meta.get("fingerprint") != fingerprint:
-        return ResultCheck("stale", "computed with other settings (fingerprint differs)", meta)
+    if reason := stale_reason(meta, fingerprint):
+        return ResultCheck("stale", reason, meta)
     if verify_files:
         try:
             check_files(path, meta, run_dir, verify=True, memo=memo)
@@ -296,8 +308,8 @@ def read_results(run_dir: str | Path, job_ids: Iterable[str] | None = None) -> p
         files = {j: p for j, p in files.items() if j in wanted}
     tables = []
     for jid, p in files.items():
-        footer = _footer(p)
-        if footer is not None and footer.get("format") != RESULT_FORMAT_VERSION:
+        footer = read_footer(p)
+        if footer is not None and stale_reason(footer):
             continue  # another result format: stale (or an orphan that cannot be read)
         try:
             meta = validate_result_file(p, jid, run_dir)
@@ -305,7 +317,7 @@ def read_results(run_dir: str | Path, job_ids: Iterable[str] | None = None) -> p
             raise StoreError(
                 f"{err}; rerun `woundsweep run {run_dir}` (it moves the file aside and redoes the job)"
             ) from None
-        if jid in expected and meta.get("fingerprint") != expected[jid]:
+        if stale_reason(meta, expected.get(jid)):
             continue
         tables.append(meta["_table"])
     return _frame(tables)

@@ -51,12 +51,12 @@ from ..core.fsutil import atomic_write
 from ..core.schema import FailureClass, StageResult, StageStatus
 from ..core.versions import RESULT_FORMAT_VERSION
 from .identity import file_sha256, fingerprints, result_fingerprint
-from .reader import META_KEY, check_result, content_digest, result_schema
+from .reader import META_KEY, check_result, content_digest, read_footer, result_schema
 from .solverfile import MESH_DATASETS, MESH_GROUP, SolverOutput, stage_group, stage_of_group
 
 __all__ = [
     "FIELDS_CHOICES",
-    "JobOutcome",
+    "AttemptOutcome",
     "JobState",
     "Store",
 ]
@@ -64,7 +64,7 @@ __all__ = [
 FIELDS_CHOICES = ("all", "final", "none")
 
 
-class JobOutcome(NamedTuple):
+class AttemptOutcome(NamedTuple):
     """What the runner learned about one job (its last attempt, times summed over attempts)."""
 
     failure_class: str
@@ -204,7 +204,7 @@ class Store:
         self.corrupt_dir.mkdir(parents=True, exist_ok=True)
         stamp = int(time.time())
         if files:
-            meta = _footer_of(src)
+            meta = read_footer(src) or {}  # a damaged footer names no files to move
             for name, key in (("fields_file", "fields_sha256"), ("mesh_file", "mesh_sha256")):
                 f = self.fields_dir / str(meta.get(name) or "")
                 if meta.get(name) and f.is_file():
@@ -312,7 +312,7 @@ class Store:
     def write_job(
         self,
         job: dict[str, Any],
-        outcome: JobOutcome,
+        outcome: AttemptOutcome,
         stages: tuple[int, int],
         fields: str,
         shard: str,
@@ -403,14 +403,6 @@ def _write_mesh(tmp: str, mesh: Any, digest: str, geometry_id: str) -> None:
         g = dst.create_group(MESH_GROUP)
         for name, ds in mesh.items():
             _copy_dataset(ds, g, name)
-
-
-def _footer_of(path: Path) -> dict[str, Any]:
-    try:
-        meta = json.loads((pq.read_schema(path).metadata or {})[META_KEY])
-    except Exception:  # noqa: BLE001 - a damaged footer names no files to move
-        return {}
-    return meta if isinstance(meta, dict) else {}
 
 
 def _mesh_file_digest(path: Path) -> str | None:

@@ -125,7 +125,7 @@ def convergence_study(
     from ..config.manifest import canonical_hash, load_run
     from ..mesh.cache import get_mesh
     from ..mesh.refine import refine_uniform
-    from ..mesh.sizing import _size_scale
+    from ..mesh.sizing import size_scale
     from ..physics.job import job_model, run_stages
 
     say = echo or (lambda _line: None)
@@ -155,7 +155,7 @@ def convergence_study(
             {
                 "mesh_size_factor": m,
                 "refinements": times,
-                "relative_size": _size_scale(m, spec.element_degree) / 2**times,
+                "relative_size": size_scale(m, spec.element_degree) / 2**times,
                 "cells": int(mesh.info["cells"]),
                 "stages": {
                     str(rec.result.stage): _stage_values(rec)

@@ -11,28 +11,13 @@ from __future__ import annotations
 
 from ..core.lazy import lazy_exports
 
-__all__ = [
-    "AtlasSummary",
-    "JobFields",
-    "build_atlas",
-    "closure_zone_facets",
-    "export_job",
-    "load_job",
-    "open_job",
-    "view_data",
-    "view_page",
-]
-
-_HOME = {
-    "AtlasSummary": "atlas",
-    "build_atlas": "atlas",
-    "JobFields": "jobdata",
-    "load_job": "jobdata",
-    "open_job": "jobdata",
-    "closure_zone_facets": "surface",
-    "export_job": "export",
-    "view_data": "view",
-    "view_page": "view",
-}
-
-__getattr__, __dir__ = lazy_exports(__name__, _HOME)
+__all__, __getattr__, __dir__ = lazy_exports(
+    __name__,
+    {
+        "atlas": ("AtlasSummary", "build_atlas"),
+        "jobdata": ("JobFields", "load_job", "open_job"),
+        "surface": ("closure_zone_facets",),
+        "export": ("export_job",),
+        "view": ("view_data", "view_page"),
+    },
+)

@@ -36,7 +36,7 @@ from .html import asset, fmt, json_script, page, plotly_js
 from .jobdata import load_job
 from .view import job_body
 
-__all__ = ["LOG_BYTES", "AtlasSummary", "build_atlas", "parse_views"]
+__all__ = ["LOG_BYTES", "AtlasSummary", "build_atlas", "log_html", "parse_views"]
 
 LOG_BYTES = 64 * 1024
 _INDEX_PARAMS = (*GEOMETRY_KEYS, "orientation_deg", "skin_type", "wound_width_mm", "wound_depth_mm")
@@ -88,7 +88,8 @@ def _write(path: Path, text: str) -> int:
     return len(data)
 
 
-def _log_html(path: Path) -> str:
+def log_html(path: Path) -> str:
+    """A job log's page block: its path and its last `LOG_BYTES`, escaped."""
     if not path.exists():
         return '<p class="noview">no log</p>\n'
     size = path.stat().st_size
@@ -255,7 +256,7 @@ def build_atlas(
             )
         elif j in views:
             jf = load_job(run, job, rows, cache)
-        footer = "<h2>Log</h2>\n" + _log_html(run.run_dir / "logs" / f"job-{job['job_id']}.log")
+        footer = "<h2>Log</h2>\n" + log_html(run.run_dir / "logs" / f"job-{job['job_id']}.log")
         body = job_body(
             job, rows, jf, view_note=note, header=_nav(j, prev, nxt, has_analysis), footer=footer
         )

@@ -14,7 +14,7 @@ import numpy as np
 from ..contact.geometry import owning_cells
 from ..core.schema import WOUND_ZONE
 
-__all__ = ["Surface", "closure_zone_facets", "max_cell_point", "surface_of", "zone_outline"]
+__all__ = ["ExteriorSurface", "closure_zone_facets", "max_cell_point", "surface_of", "zone_outline"]
 
 
 def closure_zone_facets(facet_tags: np.ndarray) -> np.ndarray:
@@ -22,7 +22,7 @@ def closure_zone_facets(facet_tags: np.ndarray) -> np.ndarray:
     return np.asarray(facet_tags) == WOUND_ZONE
 
 
-class Surface(NamedTuple):
+class ExteriorSurface(NamedTuple):
     """The exterior triangles in a compact numbering of their own nodes."""
 
     nodes: np.ndarray  # (s,) indices into the mesh points
@@ -33,12 +33,12 @@ class Surface(NamedTuple):
 
 def surface_of(
     points: np.ndarray, cells: np.ndarray, facets: np.ndarray, zone: np.ndarray
-) -> Surface:
+) -> ExteriorSurface:
     """The exterior surface of the mesh, each triangle with the cell it bounds."""
     nodes, inverse = np.unique(facets, return_inverse=True)
     triangles = inverse.reshape(facets.shape).astype(np.int32)
     owner = owning_cells(cells, facets, len(points))
-    return Surface(nodes.astype(np.int64), triangles, owner, np.asarray(zone, bool))
+    return ExteriorSurface(nodes.astype(np.int64), triangles, owner, np.asarray(zone, bool))
 
 
 def zone_outline(triangles: np.ndarray, zone: np.ndarray) -> np.ndarray:

@@ -63,7 +63,7 @@ SIZE_LAW: Mapping[str, float] = MappingProxyType(
 )
 
 
-def size_scale(mesh_size_factor: float, element_degree: int = 1) -> float:
+def size_scale(mesh_size_factor: float, element_degree: int) -> float:
     """``p * s`` of the size law: the factor that scales every length of the size field."""
     factor = (SIZE_LAW["reference_factor"] / mesh_size_factor) ** SIZE_LAW["factor_exponent"]
     return element_degree * factor

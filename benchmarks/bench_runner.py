@@ -89,7 +89,7 @@ def _startup_cost(rd: Path, runs: int = 5) -> dict[str, float]:
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--shards", type=int, default=4, help="run shard 0 of this many (default 4)")
-    ap.add_argument("--stages", default="1-3", help="default 1-3: the stages the solver has today")
+    ap.add_argument("--stages", default="1-3", help="the stages each job runs")
     args = ap.parse_args()
     shard = f"0/{args.shards}"
     print(f"load average before (cores: {os.cpu_count()}): {os.getloadavg()[0]:.2f}")

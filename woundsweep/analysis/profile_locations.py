@@ -1,7 +1,7 @@
 """Where each profile line's maximum sits (the paper's Figure 2 as it was computed).
 
 The solver stores per converged stage, in the row's ``stage_extra_json``, the running
-coordinate (mm) of each line's maximum (`model.profiles`: ``profile_<line>_max_at_mm``).
+coordinate (mm) of each line's maximum (`woundsweep.physics.profiles`: ``profile_<line>_max_at_mm``).
 Positions are normalised as the global maximum's (`paper.normalised_locations`): along the
 wound (y + L) / 2L, through the thickness -z / T, across the patch (x - w/2) / (L + w/2).
 Each line holds `PROFILE_POINTS` samples; a bin holds `POINTS_PER_BIN` neighbouring samples,
@@ -41,7 +41,7 @@ _AFFINE = {"along_wound": (0.0, 1.0), "through_thickness": (1.0, -1.0), "across_
 
 
 def _fraction(line: str, at_mm: np.ndarray, rows: pd.DataFrame) -> np.ndarray:
-    """The fraction t of each position along its line (`model.profiles.profile_lines`)."""
+    """The fraction t of each position along its line (`woundsweep.physics.profiles.profile_lines`)."""
     L = rows["patch_half_length_mm"].to_numpy(dtype=float)
     w = rows["wound_width_mm"].to_numpy(dtype=float)
     T = rows["total_thickness_mm"].to_numpy(dtype=float)

@@ -2,11 +2,11 @@
 [--stages A-B]``.
 
 Solves one job on L meshes whose mesh size factor grows by r per level, on the listed
-factors, or on one mesh and its K uniform refinements (`model.convergence`), and prints, per
+factors, or on one mesh and its K uniform refinements (`woundsweep.studies.convergence`), and prints, per
 stage and quantity, the value at each level, the observed order p, Roache's grid convergence
 index of the finest grid, the Richardson-extrapolated value and the largest deviation of a
 level from it, and with four or more levels the least-squares fit over all of them
-(`model.gci.fit_study`). Writes RUN_DIR/convergence/job_<N>.json and job_<N>.png
+(`woundsweep.studies.gci.fit_study`). Writes RUN_DIR/convergence/job_<N>.json and job_<N>.png
 (job_<N>_refined.* with --refine).
 """
 

@@ -41,8 +41,9 @@ class SolverSettings:
 
     @property
     def form_quadrature_degree(self) -> int:
-        """The degree the forms use: at least 2 (degree - 1), which integrates the element's
-        linear stiffness exactly (a P2 run with the default 1 uses 2)."""
+        """The degree the forms use: the larger of ``quadrature_degree`` and
+        2 * (element_degree - 1), the degree that integrates the element's linear stiffness
+        exactly (a P2 run with ``quadrature_degree`` 1 uses 2)."""
         return max(self.quadrature_degree, 2 * (self.element_degree - 1))
 
     def to_dict(self) -> dict[str, Any]:

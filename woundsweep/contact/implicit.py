@@ -14,7 +14,7 @@ kappa) of a surface of curvature kappa.
 Derivatives are taken per (point, facet) pair in v = (r, e1, e2), r = x - c_f, e1 = x2 - x1,
 e2 = x3 - x1, and mapped to q = (x, x1, x2, x3) by the constant ``V_TO_Q``. Vectorised over
 pairs; `pair_terms` gives each pair's N, D and their first and second derivatives in q, which
-`woundsweep.contact.penalty` sums per point.
+`woundsweep.contact.smooth` sums per point.
 """
 
 from __future__ import annotations

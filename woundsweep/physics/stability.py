@@ -4,7 +4,7 @@ A contact stage that fails either stalls at a stable state or follows an equilib
 stability and turns back in the penalty (a limit point: an eigenvalue of the tangent passes
 through zero, and no equilibrium is near at a larger penalty). The wound model records, for a
 failed contact stage, the lowest of the eigenvalues nearest zero at the last converged state,
-so the two kinds of failure can be told apart (docs/model.md, "Known limits").
+so the two kinds of failure can be told apart (docs/model.md, "Stability of a failed contact stage").
 
 The tangent is restricted to the free dofs (the Dirichlet rows and columns dropped) and
 symmetrised, (K + K^T) / 2. For a conservative problem that is the second variation of the

@@ -2,9 +2,8 @@
 
 Each increment is solved by Newton from the last converged state; the increment halves after
 a failure (up to ``max_load_cuts`` times in a row, and not below the first increment /
-2**max_load_cuts) and doubles after an easy success (at most 4 Newton steps). There is no
-secant predictor: on the wounded test patch it made two-step ramps worse than starting each
-increment from the converged state.
+2**max_load_cuts) and doubles after an easy success (at most 4 Newton steps). Each increment
+starts from the last converged state.
 """
 
 from __future__ import annotations

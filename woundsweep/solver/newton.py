@@ -1,6 +1,7 @@
 """Newton's method with adaptive relaxation over assembled PETSc objects.
 
-One Newton step solves ``J du = -R`` (MUMPS LU, KSP ``preonly``) and applies ``u += gamma du``.
+One Newton step solves ``J du = -R`` (MUMPS, KSP ``preonly``: LDL^T for a symmetric tangent,
+else LU) and applies ``u += gamma du``.
 The relaxation factor gamma follows a FIRE-like rule: it shrinks (x0.5) when an update is too
 large (its largest cellwise displacement-gradient increment exceeds ``max_strain_step``), when
 it would invert an element (min J <= 0), or when the residual grows; it grows (x2, up to 1)

@@ -1,6 +1,6 @@
 """Result identity: the fingerprint of what determines a job's result, and file checksums.
 
-``job_id`` names a job by its parameters only (`grid.canonical_hash`), so it survives a
+``job_id`` names a job by its parameters only (`woundsweep.config.manifest.canonical_hash`), so it survives a
 change of materials or settings. `result_fingerprint` is the sha256 of the canonical JSON of
 everything that determines the job's numbers: its parameters (geometry, skin type,
 orientation), the material values it uses (the subcutis and its own skin type's set, not just

@@ -4,7 +4,7 @@ Layout (docs/design.md, "Solver output"): root attributes (`ROOT_ATTRS`; ``stage
 a JSON list with one dict per reported stage: the `StageResult` fields plus diagnostic keys),
 the group ``mesh`` with `MESH_DATASETS` in the input numbering, and for every converged stage
 a group ``stage_<k>`` with `STAGE_DATASETS` (float32 per point, per cell) and, when the
-solver sampled them, `PROFILE_DATASETS` (von Mises on the lines of `model.profiles`). An
+solver sampled them, `PROFILE_DATASETS` (von Mises on the lines of `woundsweep.physics.profiles`). An
 unconverged state is never written as a field.
 """
 

@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 import pytest
 import scipy.sparse
-from test_contact import penetrating_state, two_squares
+from contact_surfaces import penetrating_state, two_squares
 
 from woundsweep.contact import GPA_TO_KPA, FlankContact
 from woundsweep.physics.assembly import structure

@@ -21,15 +21,6 @@ CONVERGED = "converged"
 
 
 @pytest.fixture(scope="module")
-def cylinder_mesh():
-    from woundsweep.config.geometry import GeometrySpec
-    from woundsweep.mesh.build import build_mesh
-
-    # Demo job 0: t_d = 1, subcutis 1, L = 4, width 1.2, aspect 0 (depth 0.6), m = 0.3.
-    return build_mesh(GeometrySpec.cylindrical(1.0, 1.0, 4.0, 1.2, 0.0, 0.3))
-
-
-@pytest.fixture(scope="module")
 def wedge_mesh():
     from woundsweep.config.geometry import GeometrySpec
     from woundsweep.mesh.build import build_mesh

@@ -11,12 +11,19 @@ import json
 import subprocess
 import sys
 from pathlib import Path
-from typing import NamedTuple
+from typing import Any, NamedTuple
+
+import yaml
 
 TESTS = Path(__file__).resolve().parent
 ROOT = TESTS.parent
 DEMO = ROOT / "sweeps" / "demo.yaml"
 WS = [sys.executable, "-m", "woundsweep"]
+
+
+def demo_doc() -> dict[str, Any]:
+    """sweeps/demo.yaml as a fresh document (safe to edit)."""
+    return yaml.safe_load(DEMO.read_text())
 
 
 def ws(

@@ -27,6 +27,7 @@ from pathlib import Path
 import pandas as pd
 import pytest
 import yaml
+from cli_run import DEMO, ROOT, ws
 from slurm_cluster import ClusterError, SlurmCluster, start_cluster, unavailable_reason
 
 from woundsweep.config.manifest import expand
@@ -41,26 +42,8 @@ from woundsweep.execution.slurm import (
     warmup_shard,
 )
 
-ROOT = Path(__file__).resolve().parent.parent
-DEMO = ROOT / "sweeps" / "demo.yaml"
 DATA = ROOT / "tests" / "data" / "slurm"
 REGEN = os.environ.get("WOUNDSWEEP_REGEN") == "1"
-
-
-def ws(*args: str, env: dict[str, str] | None = None, timeout: float = 120):
-    return subprocess.run(
-        [sys.executable, "-m", "woundsweep", *args],
-        capture_output=True, text=True, timeout=timeout, env=env,
-    )  # fmt: skip
-
-
-@pytest.fixture(scope="module")
-def demo_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A generated demo run directory (read-only for the tests that use it)."""
-    rd = tmp_path_factory.mktemp("demo") / "run"
-    res = ws("generate", str(DEMO), "--out", str(rd))
-    assert res.returncode == 0, res.stderr
-    return rd
 
 
 def _fixed_options(run_dir: Path) -> SlurmOptions:

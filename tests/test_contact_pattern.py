@@ -82,7 +82,7 @@ def test_a_tangent_past_the_plan_grows_the_pattern_without_dropping_it() -> None
     assert not _contains(P0, K)  # the slide reaches past the plan ...
     assert c.pattern_growths == 1 and c.pattern_version != v0
     P1 = c.coupling_pattern()
-    assert _contains(P1, K) and _contains(P1, P0)  # ... which grows and keeps the old pairs
+    assert _contains(P1, K) and _contains(P1, P0)  # ... which grows and keeps P0's pairs
     c.tangent_csr(u1)  # the same state again: no growth
     assert c.pattern_growths == 1
 

@@ -143,7 +143,7 @@ def test_stale_jit_lock_from_a_killed_compile_is_recovered(tmp_path: Path) -> No
     proc.wait()
     locks = list(cache.glob("libffcx_forms_*.c"))
     assert len(locks) == 1 and not locks[0].with_suffix(".c.cached").exists()
-    # FFCx itself now waits for that lock and gives up: the message names the lock file.
+    # FFCx itself waits for that lock and gives up: the message names the lock file.
     res = subprocess.run(
         [sys.executable, "-c", _COMPILE, str(cache)], capture_output=True, text=True
     )

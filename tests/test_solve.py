@@ -302,7 +302,7 @@ def test_second_job_with_other_parameters_compiles_nothing(
 @pytest.mark.slow
 def test_cold_cache_compiles_each_form_once_per_machine(run_dir: Path, tmp_path: Path) -> None:
     """Fresh processes on an empty JIT cache: the first job compiles, a second job with other
-    parameters compiles nothing (FFCx 0.5 used to recompile the Jacobian under a new hash)."""
+    parameters compiles nothing (no form, the Jacobian included, gets a new hash)."""
     cache = tmp_path / "xdg"
     env = dict(os.environ, XDG_CACHE_HOME=str(cache), OPENBLAS_NUM_THREADS="1")
     base = [sys.executable, "-m", "woundsweep", "solve", str(run_dir), "--stages", "1-2"]

@@ -99,7 +99,7 @@ def test_contact_at_45_degrees(cylinder_mesh) -> None:
     d6 = outs[5].diagnostics
     assert d6["max_penetration_rel"] < 0.01
     assert d6["n_penetrating"] > 0 and d6["contact_force_mN"] > 0
-    # Not mirror-symmetric any more: the two flanks move differently along y.
+    # Oblique fibres break the mirror symmetry: the two flanks move differently along y.
     uy = m.u.reshape(-1, 3)[:, 1]
     left, right = _flank_nodes(m)
     assert abs(np.mean(uy[left]) - np.mean(uy[right])) > 1e-4

@@ -86,7 +86,7 @@ def test_job_state_is_stale_when_more_stages_are_asked_for(empty_run: Path) -> N
     store_converged(empty_run, 0, stages=(1, 3))
     assert store.job_state(jid, (1, 3)) == ("done", "converged", "")
     assert store.job_state(jid, (2, 3)).state == "done"
-    assert store.job_state(jid, (1, 6)).state == "stale"  # stages 4-6 now asked for
+    assert store.job_state(jid, (1, 6)).state == "stale"  # stages 4-6 asked for too
 
 
 def test_fingerprint_covers_what_determines_a_result(empty_run: Path) -> None:

@@ -18,6 +18,7 @@ import yaml
 TESTS = Path(__file__).resolve().parent
 ROOT = TESTS.parent
 DEMO = ROOT / "sweeps" / "demo.yaml"
+PAPER = ROOT / "sweeps" / "paper.yaml"
 WS = [sys.executable, "-m", "woundsweep"]
 
 

@@ -2,7 +2,7 @@
 
 Run directories: `demo_run` is sweeps/demo.yaml generated once through `woundsweep generate`
 (32 jobs; read-only: copy it before changing anything), `empty_run` a fresh directory holding
-its manifest and sweep copy only. CLI runners: `cli` (the fork server of tests/cli_run.py)
+its manifest and sweep copy only. Manifests: `paper` and `demo_manifest`, expanded from sweeps/paper.yaml and sweeps/demo.yaml. CLI runners: `cli` (the fork server of tests/cli_run.py)
 and `run_main` (`woundsweep.cli.main` in this process, output captured). Small meshes:
 `squares` (two facing, non-matching triangulated squares) and `cylinder_mesh` (the coarsest
 demo cylinder).
@@ -14,7 +14,7 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
-from cli_run import DEMO, ForkCli, ws
+from cli_run import DEMO, PAPER, ForkCli, ws
 
 
 @pytest.fixture(scope="session")
@@ -54,6 +54,24 @@ def run_main(capsys: pytest.CaptureFixture[str]) -> Callable[..., tuple[int, str
         return rc, out, err
 
     return run
+
+
+@pytest.fixture(scope="module")
+def paper():
+    """The manifest of sweeps/paper.yaml (11 664 jobs)."""
+    from woundsweep.config.manifest import expand
+    from woundsweep.config.sweep import load_sweep
+
+    return expand(load_sweep(PAPER))
+
+
+@pytest.fixture(scope="module")
+def demo_manifest():
+    """The manifest of sweeps/demo.yaml (32 jobs)."""
+    from woundsweep.config.manifest import expand
+    from woundsweep.config.sweep import load_sweep
+
+    return expand(load_sweep(DEMO))
 
 
 @pytest.fixture(scope="module")

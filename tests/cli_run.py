@@ -1,6 +1,6 @@
 """Running the woundsweep CLI from tests: as a subprocess, or through the fork server.
 
-`ws(*args)` runs ``python -m woundsweep ARGS`` and returns the completed process.
+`generate_run(doc, where)` generates a run directory from a sweep document; `ws(*args)` runs ``python -m woundsweep ARGS`` and returns the completed process.
 `ForkCli` talks to tests/cli_forkserver.py: ``cli(argv, cwd)`` runs `woundsweep.cli.main` in a
 fresh process forked from one that imported the CLI once, with a timeout.
 """
@@ -25,6 +25,18 @@ WS = [sys.executable, "-m", "woundsweep"]
 def demo_doc() -> dict[str, Any]:
     """sweeps/demo.yaml as a fresh document (safe to edit)."""
     return yaml.safe_load(DEMO.read_text())
+
+
+def generate_run(doc: dict[str, Any], where: Path, name: str = "run") -> Path:
+    """Write the sweep ``doc`` to WHERE/NAME.yaml and generate the run WHERE/NAME from it
+    (`woundsweep generate` in this process)."""
+    from woundsweep.cli import main
+
+    sweep = where / f"{name}.yaml"
+    sweep.write_text(yaml.safe_dump(doc))
+    rd = where / name
+    assert main(["generate", str(sweep), "--out", str(rd)]) == 0
+    return rd
 
 
 def ws(

@@ -5,11 +5,9 @@ or two, 18 jobs); `solve_processes` lists the live `woundsweep solve` processes 
 from __future__ import annotations
 
 import json
-import subprocess
 from pathlib import Path
 
-import yaml
-from cli_run import WS
+from cli_run import generate_run
 
 FORKSERVER = b"woundsweep.execution.forkserver"
 
@@ -32,11 +30,7 @@ SWEEP = {
 def make_run(tmp_path: Path, name: str, shapes: tuple[str, ...] = ("cylindrical",)) -> Path:
     sweep = json.loads(json.dumps(SWEEP))
     sweep["shapes"] = {k: v for k, v in sweep["shapes"].items() if k in shapes}
-    yml = tmp_path / f"{name}.yaml"
-    yml.write_text(yaml.safe_dump(sweep))
-    rd = tmp_path / name
-    subprocess.run([*WS, "generate", str(yml), "--out", str(rd)], check=True, capture_output=True)
-    return rd
+    return generate_run(sweep, tmp_path, name)
 
 
 def solve_processes(rd: Path) -> list[int]:

@@ -124,14 +124,12 @@ class _Step:
 
 
 @pytest.fixture(scope="module")
-def stage4() -> dict[str, Any]:
+def stage4(cylinder_mesh) -> dict[str, Any]:
     """Stages 1-4 of the demo cylinder at 45 degrees, every stage-4 Jacobian recorded."""
-    from woundsweep.config.geometry import GeometrySpec
-    from woundsweep.mesh.build import build_mesh
     from woundsweep.physics.materials import JobMaterials
     from woundsweep.physics.stages import WoundModel
 
-    m = WoundModel(build_mesh(GeometrySpec.cylindrical(1.0, 1.0, 4.0, 1.2, 0.0, 0.3)))
+    m = WoundModel(cylinder_mesh)
     m.set_materials(JobMaterials.table2("stiff", 45.0))
     for k in (1, 2, 3):
         m.run_stage(k)

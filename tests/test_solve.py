@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import yaml
+from cli_run import generate_run
 
 from woundsweep.core.errors import SolverError
 from woundsweep.core.schema import StageResult, parse_stage_range
@@ -145,16 +145,7 @@ def test_stage_result_fields_match_the_design_contract() -> None:
 
 
 def _run_dir(tmp_path: Path, solver: dict | None = None) -> Path:
-    from woundsweep.cli import main
-
-    sweep = dict(SMALL_SWEEP)
-    if solver:
-        sweep["solver"] = solver
-    path = tmp_path / "sweep.yaml"
-    path.write_text(yaml.safe_dump(sweep))
-    run = tmp_path / "run"
-    assert main(["generate", str(path), "--out", str(run)]) == 0
-    return run
+    return generate_run({**SMALL_SWEEP, **({"solver": solver} if solver else {})}, tmp_path)
 
 
 @pytest.fixture(scope="module")

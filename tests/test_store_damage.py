@@ -21,7 +21,7 @@ import numpy as np
 import pyarrow.parquet as pq
 import pytest
 import yaml
-from cli_run import WS, ForkCli, demo_doc
+from cli_run import WS, ForkCli, demo_doc, generate_run
 from store_files import manifest, outcome, solver_file, store_converged
 
 from woundsweep.config.manifest import load_run
@@ -40,11 +40,9 @@ SMALL = {
 
 
 @pytest.fixture
-def stored_run(tmp_path: Path, cli: ForkCli) -> Path:
+def stored_run(tmp_path: Path) -> Path:
     """A 4-job run whose every job is stored as converged, fields and mesh files included."""
-    (tmp_path / "s.yaml").write_text(yaml.safe_dump(SMALL))
-    assert cli(["generate", "s.yaml", "--out", "run"], tmp_path).code == 0
-    rd = tmp_path / "run"
+    rd = generate_run(SMALL, tmp_path)
     store = Store(rd)
     for i, job in manifest(rd).iterrows():
         src = tmp_path / f"solver-{i}.h5"

@@ -17,8 +17,6 @@ from woundsweep.core.errors import SolverError
 from woundsweep.core.schema import StageResult, parse_stage_range
 from woundsweep.physics.job import stress_summary
 
-REPO = Path(__file__).resolve().parent.parent
-
 SMALL_SWEEP = {
     "name": "solve-test",
     "grid": {

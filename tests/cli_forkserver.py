@@ -1,6 +1,6 @@
 """Run woundsweep's real CLI entry point once per request, each in a fresh forked process.
 
-Started as a subprocess by tests/test_bad_inputs.py. It imports the CLI once and then, per
+Started as a subprocess by `ForkCli` (tests/cli_run.py). It imports the CLI once and then, per
 JSON request on stdin (one line: argv, cwd, stdout/stderr file paths, optional env and file
 size limit, timeout), forks a child that does what ``python -m woundsweep ARGV`` does
 (`woundsweep.cli.main`, then exit with its status, an uncaught exception printing its

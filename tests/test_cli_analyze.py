@@ -50,12 +50,6 @@ TRAINING_COLUMNS = [
 ]  # fmt: skip
 
 
-def run_cli(capsys: pytest.CaptureFixture[str], *args: object) -> tuple[int, str, str]:
-    rc = main([str(a) for a in args])
-    out, err = capsys.readouterr()
-    return rc, out, err
-
-
 def assert_refused(rc: int, err: str, *needles: str) -> None:
     assert rc == 2
     lines = err.strip().splitlines()
@@ -130,11 +124,11 @@ def test_analyze_writes_every_output(analyzed: tuple[Path, str], results: pd.Dat
 
 
 def test_identical_seeds_give_identical_metrics(
-    analyzed: tuple[Path, str], store: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+    analyzed: tuple[Path, str], store: Path, tmp_path: Path, run_main
 ) -> None:
     rd = tmp_path / "again"
     shutil.copytree(store, rd)
-    rc, _, err = run_cli(capsys, "analyze", rd, *FAST)
+    rc, _, err = run_main("analyze", rd, *FAST)
     assert rc == 0, err
     first = (analyzed[0] / "analysis" / "metrics.json").read_bytes()
     assert (rd / "analysis" / "metrics.json").read_bytes() == first
@@ -167,14 +161,14 @@ def test_predict_returns_the_model_class_for_a_training_row(
     analyzed: tuple[Path, str],
     results: pd.DataFrame,
     shape: str,
-    capsys: pytest.CaptureFixture[str],
+    run_main,
 ) -> None:
     import xgboost as xgb
 
     rd = analyzed[0]
     rows = results
     row = rows[(rows["wound_shape"] == shape) & (rows["status"] == "converged")].iloc[7]
-    rc, out, err = run_cli(capsys, "predict", rd, *_predict_args(row), "--json")
+    rc, out, err = run_main("predict", rd, *_predict_args(row), "--json")
     assert rc == 0, err
     answer = json.loads(out)
     assert answer["scheme"] == "geometry"
@@ -203,31 +197,31 @@ def test_predict_returns_the_model_class_for_a_training_row(
 
 
 def test_predict_refuses_or_flags_extrapolation(
-    analyzed: tuple[Path, str], results: pd.DataFrame, capsys: pytest.CaptureFixture[str]
+    analyzed: tuple[Path, str], results: pd.DataFrame, run_main
 ) -> None:
     rd = analyzed[0]
     rows = results
     row = rows[rows["wound_shape"] == "wedge"].iloc[0].copy()
     row["dermal_thickness_mm"] = 3.0  # trained on 1 mm only
-    rc, _, err = run_cli(capsys, "predict", rd, *_predict_args(row))
+    rc, _, err = run_main("predict", rd, *_predict_args(row))
     assert_refused(rc, err, "dermal_thickness_mm=3", "--allow-extrapolation")
-    rc, out, err = run_cli(
-        capsys, "predict", rd, *_predict_args(row), "--allow-extrapolation", "--split", "random"
+    rc, out, err = run_main(
+        "predict", rd, *_predict_args(row), "--allow-extrapolation", "--split", "random"
     )
     assert rc == 0, err
     assert "EXTRAPOLATED" in out and "dermal_thickness_mm=3" in out and "random split" in out
 
 
 def test_predict_refuses_the_other_shapes_factor(
-    analyzed: tuple[Path, str], results: pd.DataFrame, capsys: pytest.CaptureFixture[str]
+    analyzed: tuple[Path, str], results: pd.DataFrame, run_main
 ) -> None:
     rows = results
     row = rows[rows["wound_shape"] == "wedge"].iloc[0]
-    rc, _, err = run_cli(
-        capsys, "predict", analyzed[0], *_predict_args(row), "--wound-aspect-factor", "0.1"
+    rc, _, err = run_main(
+        "predict", analyzed[0], *_predict_args(row), "--wound-aspect-factor", "0.1"
     )
     assert_refused(rc, err, "wound_aspect_factor does not apply")
-    rc, _, err = run_cli(capsys, "predict", analyzed[0].parent / "nowhere", *_predict_args(row))
+    rc, _, err = run_main("predict", analyzed[0].parent / "nowhere", *_predict_args(row))
     assert_refused(rc, err, "no such model file or run directory")
 
 
@@ -244,38 +238,36 @@ TINY = {
 }
 
 
-def test_analyze_without_results(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_analyze_without_results(tmp_path: Path, run_main) -> None:
     write_store(tmp_path, sweep=TINY)
     shutil.rmtree(tmp_path / "results")
-    assert_refused(*run_cli(capsys, "analyze", tmp_path)[::2], "no result store")
+    assert_refused(*run_main("analyze", tmp_path)[::2], "no result store")
 
 
-def test_analyze_names_a_result_file_with_missing_columns(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str]
-) -> None:
+def test_analyze_names_a_result_file_with_missing_columns(tmp_path: Path, run_main) -> None:
     rows = write_store(tmp_path, sweep=TINY)
     job = rows["job_id"].iloc[0]
     rows[rows["job_id"] == job].drop(columns=["p99_von_mises_kPa"]).to_parquet(
         tmp_path / "results" / f"job-{job}.parquet"
     )
     assert_refused(
-        *run_cli(capsys, "analyze", tmp_path)[::2],
+        *run_main("analyze", tmp_path)[::2],
         f"job-{job}.parquet",
         "columns differ from the result schema",
     )
 
 
-def test_analyze_without_converged_rows(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_analyze_without_converged_rows(tmp_path: Path, run_main) -> None:
     rows = write_store(tmp_path, sweep=TINY)
     write_results(tmp_path, rows.assign(status="diverged"))
-    assert_refused(*run_cli(capsys, "analyze", tmp_path)[::2], "no converged rows")
+    assert_refused(*run_main("analyze", tmp_path)[::2], "no converged rows")
 
 
-def test_analyze_with_too_few_rows(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_analyze_with_too_few_rows(tmp_path: Path, run_main) -> None:
     # 12 geometries x 9 jobs x 1 stage = 108 rows < 10 per class x 12 classes.
     write_store(tmp_path / "a", sweep=TINY, stages=(1,), failed_fraction=0.0)
     assert_refused(
-        *run_cli(capsys, "analyze", tmp_path / "a", "--quantiles", "12")[::2],
+        *run_main("analyze", tmp_path / "a", "--quantiles", "12")[::2],
         "108 usable rows",
         "at least 120",
     )
@@ -286,17 +278,13 @@ def test_analyze_with_too_few_rows(tmp_path: Path, capsys: pytest.CaptureFixture
         "shapes": {"wedge": {"wound_depth_factor": [0.5]}},
     }
     write_store(tmp_path / "b", sweep=one, failed_fraction=0.0)
-    rc, _, err = run_cli(
-        capsys, "analyze", tmp_path / "b", "--quantiles", "5", "--split", "geometry"
-    )
+    rc, _, err = run_main("analyze", tmp_path / "b", "--quantiles", "5", "--split", "geometry")
     assert_refused(rc, err, "geometry split: empty validation set from 54 rows (1 geometries)")
 
 
-def test_analyze_rejects_unknown_settings(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str]
-) -> None:
+def test_analyze_rejects_unknown_settings(tmp_path: Path, run_main) -> None:
     write_store(tmp_path, sweep=TINY)
     assert_refused(
-        *run_cli(capsys, "analyze", tmp_path, "--param", "max_dept=3")[::2], "analysis.max_dept"
+        *run_main("analyze", tmp_path, "--param", "max_dept=3")[::2], "analysis.max_dept"
     )
-    assert_refused(*run_cli(capsys, "analyze", tmp_path, "--param", "max_depth")[::2], "KEY=VALUE")
+    assert_refused(*run_main("analyze", tmp_path, "--param", "max_depth")[::2], "KEY=VALUE")

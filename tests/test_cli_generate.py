@@ -4,22 +4,12 @@ from __future__ import annotations
 
 import json
 import os
-import subprocess
-import sys
 from pathlib import Path
 
 import pandas as pd
 import pytest
 import yaml
-
-ROOT = Path(__file__).resolve().parent.parent
-DEMO = ROOT / "sweeps" / "demo.yaml"
-
-
-def ws(*args: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", "woundsweep", *args], capture_output=True, text=True, timeout=120
-    )
+from cli_run import DEMO, ws
 
 
 def test_help_and_version() -> None:

@@ -5,19 +5,17 @@ from __future__ import annotations
 import re
 import shutil
 import subprocess
-import sys
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
+from cli_run import ws as run_ws
 
 from woundsweep.core.schema import CELL_TAGS, FACET_TAGS
 from woundsweep.mesh.cache import load_mesh
 
-ROOT = Path(__file__).resolve().parent.parent
-DEMO = ROOT / "sweeps" / "demo.yaml"
 LINE = re.compile(
     r"^geometry ([0-9a-f]{16}) \(jobs? [\d-]+\): (\d+) cells, (\d+) vertices, "
     r"min SICN (0\.\d+), (built in|reused from cache \(built in) [\d.]+ s\)?$"
@@ -25,16 +23,14 @@ LINE = re.compile(
 
 
 def ws(*args: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", "woundsweep", *args], capture_output=True, text=True, timeout=300
-    )
+    return run_ws(*args, timeout=300)
 
 
 @pytest.fixture(scope="module")
-def run_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+def run_dir(demo_run: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A copy of the demo run (the mesh commands write its mesh cache)."""
     rd = tmp_path_factory.mktemp("mesh") / "run"
-    res = ws("generate", str(DEMO), "--out", str(rd))
-    assert res.returncode == 0, res.stderr
+    shutil.copytree(demo_run, rd)
     return rd
 
 

@@ -34,7 +34,7 @@ def tri_areas(points: np.ndarray, tris: np.ndarray) -> np.ndarray:
 
 
 def shape_spec(shape: str, m: float, **zone: float) -> GeometrySpec:
-    # The patch (t_d = 1, T = 2, L = 4, w = 1.2); the wedge is as deep as the cylinder.
+    # The demo patch (t_d = 1, T = 2, L = 4, w = 1.2); the wedge is as deep as the cylinder.
     if shape == "cylindrical":
         spec = GeometrySpec.cylindrical(1.0, 1.0, 4.0, 1.2, 0.0, m)
     else:

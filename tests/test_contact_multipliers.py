@@ -4,15 +4,9 @@ against the penalty's own forces, the active set they keep, and their linearisat
 from __future__ import annotations
 
 import numpy as np
-import pytest
-from test_contact import make_contact, penetrating_state, two_squares
+from contact_surfaces import make_contact, penetrating_state
 
 from woundsweep.contact import ContactMultipliers
-
-
-@pytest.fixture(scope="module")
-def squares():
-    return two_squares(3, 4)  # non-matching triangulations
 
 
 def test_penalty_multipliers_give_the_penalty_tangent(squares) -> None:

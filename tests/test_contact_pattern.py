@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 import pytest
 import scipy.sparse
-from test_contact import penetrating_state, two_squares
+from contact_surfaces import penetrating_state, two_squares
 
 from woundsweep.contact import GPA_TO_KPA, FlankContact
 from woundsweep.physics.assembly import structure
@@ -82,7 +82,7 @@ def test_a_tangent_past_the_plan_grows_the_pattern_without_dropping_it() -> None
     assert not _contains(P0, K)  # the slide reaches past the plan ...
     assert c.pattern_growths == 1 and c.pattern_version != v0
     P1 = c.coupling_pattern()
-    assert _contains(P1, K) and _contains(P1, P0)  # ... which grows and keeps the old pairs
+    assert _contains(P1, K) and _contains(P1, P0)  # ... which grows and keeps P0's pairs
     c.tangent_csr(u1)  # the same state again: no growth
     assert c.pattern_growths == 1
 
@@ -124,14 +124,12 @@ class _Step:
 
 
 @pytest.fixture(scope="module")
-def stage4() -> dict[str, Any]:
+def stage4(cylinder_mesh) -> dict[str, Any]:
     """Stages 1-4 of the demo cylinder at 45 degrees, every stage-4 Jacobian recorded."""
-    from woundsweep.config.geometry import GeometrySpec
-    from woundsweep.mesh.build import build_mesh
     from woundsweep.physics.materials import JobMaterials
     from woundsweep.physics.stages import WoundModel
 
-    m = WoundModel(build_mesh(GeometrySpec.cylindrical(1.0, 1.0, 4.0, 1.2, 0.0, 0.3)))
+    m = WoundModel(cylinder_mesh)
     m.set_materials(JobMaterials.table2("stiff", 45.0))
     for k in (1, 2, 3):
         m.run_stage(k)

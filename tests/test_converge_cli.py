@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import yaml
+from cli_run import generate_run
 
 from woundsweep.studies.gci import fit_study, grid_study
 
@@ -29,12 +29,7 @@ SWEEP = {
 
 @pytest.fixture(scope="module")
 def run_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    from woundsweep.cli import main
-
-    tmp = tmp_path_factory.mktemp("converge")
-    (tmp / "sweep.yaml").write_text(yaml.safe_dump(SWEEP))
-    assert main(["generate", str(tmp / "sweep.yaml"), "--out", str(tmp / "run")]) == 0
-    return tmp / "run"
+    return generate_run(SWEEP, tmp_path_factory.mktemp("converge"))
 
 
 @pytest.mark.fem

@@ -52,7 +52,7 @@ def test_order_is_the_documented_formula() -> None:
 @pytest.mark.parametrize(
     ("values", "kind"),
     [
-        ((36.2, 46.6, 34.0), "oscillatory"),  # the stage-3 p99, coarse to fine
+        ((36.2, 46.6, 34.0), "oscillatory"),  # a stage-3 p99 that oscillates, coarse to fine
         ((1.0, 2.0, 4.0), "divergent"),  # differences grow with refinement
         ((3.0, 3.0, 4.0), "divergent"),  # e32 = 0, e21 != 0
         ((5.0, 5.0, 5.0), "constant"),

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from test_stages import SKIN_TYPES, box_patch, homogeneous_field, rel_l2
+from skin_patch import SKIN_TYPES, box_patch, homogeneous_field, rel_l2
 
 pytestmark = pytest.mark.fem
 

@@ -20,7 +20,8 @@ import h5py
 import numpy as np
 import pandas as pd
 import pytest
-from test_runner import WS, _make_run, _solve_processes
+from cli_run import WS
+from runner_sweep import make_run, solve_processes
 
 from woundsweep.execution.forkserver import ForkServer, JobRequest
 from woundsweep.execution.jitlock import may_compile
@@ -169,7 +170,7 @@ def _datasets(path: Path) -> dict[str, np.ndarray]:
 def test_forked_solve_equals_a_fresh_interpreter(server: ForkServer, tmp_path: Path) -> None:
     """MPI and PETSc (MUMPS) work in a child forked after their initialisation: stage 1 of a
     45-degree job gives the same fields, bit for bit, and the same result rows."""
-    rd = _make_run(tmp_path, "eq")
+    rd = make_run(tmp_path, "eq")
     manifest = pd.read_parquet(rd / "manifest.parquet")
     job = int(manifest.loc[manifest["orientation_deg"] == 45, "job_index"].iloc[0])
     args = ["solve", str(rd), "--job", str(job), "--stages", "1-1", "--out"]
@@ -211,7 +212,7 @@ def _jobs_of(rd: Path, n: int, timeout: float = 120) -> list[int]:
     """Wait until ``n`` forked job processes of ``rd`` run; their pids."""
     deadline = time.time() + timeout
     while time.time() < deadline:
-        jobs = [p for p in _solve_processes(rd) if Path(f"/proc/{p}/comm").exists()]
+        jobs = [p for p in solve_processes(rd) if Path(f"/proc/{p}/comm").exists()]
         jobs = [p for p in jobs if Path(f"/proc/{p}/comm").read_text().strip() == JOB_NAME]
         if len(jobs) >= n and all(
             "injecting hang" in p.read_text() for p in (rd / "logs").glob("*.log")
@@ -225,10 +226,10 @@ def _jobs_of(rd: Path, n: int, timeout: float = 120) -> list[int]:
 def test_runner_stopped_takes_its_server_and_jobs(tmp_path: Path, sig: int) -> None:
     """SIGTERM (a batch time limit): exit 143 with one line, jobs killed, nothing stored;
     kill -9: the server and the jobs die with the runner (PR_SET_PDEATHSIG)."""
-    rd = _make_run(tmp_path, "stop")
+    rd = make_run(tmp_path, "stop")
     proc = _runner(rd, "--workers", "2")
     jobs = _jobs_of(rd, 2)
-    assert len(_solve_processes(rd)) == 3  # the server and two jobs
+    assert len(solve_processes(rd)) == 3  # the server and two jobs
     proc.send_signal(sig)
     out, err = proc.communicate(timeout=60)
     if sig == signal.SIGTERM:
@@ -240,21 +241,21 @@ def test_runner_stopped_takes_its_server_and_jobs(tmp_path: Path, sig: int) -> N
         assert proc.returncode == -signal.SIGKILL
     assert all(_gone(p) for p in jobs)
     deadline = time.time() + 10
-    while _solve_processes(rd) and time.time() < deadline:
+    while solve_processes(rd) and time.time() < deadline:
         time.sleep(0.05)
-    assert not _solve_processes(rd)
+    assert not solve_processes(rd)
     assert not list((rd / "results").glob("*.parquet"))
 
 
 def test_attempt_killed_with_its_server_is_retried_by_a_new_server(tmp_path: Path) -> None:
     """The runner's server dies while attempt 1 hangs: that attempt ends `crashed` (killed by
     SIGKILL), a new server starts, and attempt 2 solves the job."""
-    rd = _make_run(tmp_path, "respawn")
+    rd = make_run(tmp_path, "respawn")
     cmd = [*WS, "run", str(rd), "--no-progress", "--stages", "1-1", "--shard", "0/9"]
     env = dict(os.environ, WOUNDSWEEP_FAULT="hang#1")
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env, text=True)
     (job,) = _jobs_of(rd, 1)
-    (first,) = [p for p in _solve_processes(rd) if p != job]
+    (first,) = [p for p in solve_processes(rd) if p != job]
     os.kill(first, signal.SIGKILL)
     out, err = proc.communicate(timeout=600)
     assert proc.returncode == 0, err
@@ -269,4 +270,4 @@ def test_attempt_killed_with_its_server_is_retried_by_a_new_server(tmp_path: Pat
     assert "fork server ended; this attempt was killed" in log
     assert "attempt 1 ended: crashed: killed by SIGKILL" in log
     assert "attempt 2 ended: converged" in log
-    assert not _solve_processes(rd)
+    assert not solve_processes(rd)

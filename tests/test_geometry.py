@@ -302,14 +302,8 @@ def _paper_row(manifest, **where):
     return sel.drop_duplicates("geometry_id")
 
 
-def test_cell_cap_holds_for_extreme_paper_geometries() -> None:
-    from pathlib import Path
-
-    from woundsweep.config.manifest import expand
-    from woundsweep.config.sweep import load_sweep
-
-    man = expand(load_sweep(Path(__file__).resolve().parent.parent / "sweeps" / "paper.yaml"))
-    finest = man[man["mesh_size_factor"] == man["mesh_size_factor"].max()]
+def test_cell_cap_holds_for_extreme_paper_geometries(paper: pd.DataFrame) -> None:
+    finest = paper[paper["mesh_size_factor"] == paper["mesh_size_factor"].max()]
     picks = [
         # largest patch relative to the dermis, narrowest (finest-meshed) wound, deepest wedge
         _paper_row(

@@ -9,19 +9,11 @@ from pathlib import Path
 import pandas as pd
 import pytest
 import yaml
+from cli_run import DEMO, PAPER
 
 from woundsweep.config.manifest import expand
 from woundsweep.config.sweep import MANIFEST_COLUMNS, load_sweep, parse_sweep
 from woundsweep.core.errors import SweepError
-
-ROOT = Path(__file__).resolve().parent.parent
-PAPER = ROOT / "sweeps" / "paper.yaml"
-DEMO = ROOT / "sweeps" / "demo.yaml"
-
-
-@pytest.fixture(scope="module")
-def paper() -> pd.DataFrame:
-    return expand(load_sweep(PAPER))
 
 
 def test_paper_grid_counts(paper: pd.DataFrame) -> None:

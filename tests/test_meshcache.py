@@ -69,7 +69,7 @@ def _damage_empty(path: Path) -> None:
 
 
 def _damage_arrays_keep_checksum(path: Path) -> None:
-    # A well-formed npz whose arrays no longer match the stored checksum.
+    # A well-formed npz whose arrays do not match the stored checksum.
     with np.load(path) as npz:
         content = {k: npz[k] for k in npz.files}
     content["points"] = content["points"].copy()

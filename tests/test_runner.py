@@ -21,6 +21,8 @@ import numpy as np
 import pandas as pd
 import pytest
 import yaml
+from cli_run import WS
+from runner_sweep import SWEEP, make_run, solve_processes
 
 from woundsweep.cli import COMMANDS
 from woundsweep.config.manifest import load_run
@@ -30,36 +32,9 @@ from woundsweep.execution.jitlock import JIT_TIMEOUT_RE, clear_stale_jit_locks, 
 from woundsweep.execution.shards import partition
 from woundsweep.store.reader import read_results
 
-WS = [sys.executable, "-m", "woundsweep"]
-FORKSERVER = b"woundsweep.execution.forkserver"
 needs_solve = pytest.mark.skipif(
     "solve" not in COMMANDS, reason="`woundsweep solve` is not registered in woundsweep/cli.py yet"
 )
-
-# One coarse geometry (9 jobs) or two (18 jobs): the cheapest corner of the demo sweep.
-SWEEP = {
-    "name": "runner-test",
-    "grid": {
-        "dermal_thickness_mm": [1],
-        "subcutis_thickness_factor": [1],
-        "patch_size_factor": [1],
-        "wound_width_factor": [0.3],
-        "mesh_size_factor": [0.3],
-        "skin_type": ["stiff", "soft", "normal"],
-        "orientation_deg": [0, 45, 90],
-    },
-    "shapes": {"cylindrical": {"wound_aspect_factor": [0]}, "wedge": {"wound_depth_factor": [0.3]}},
-}
-
-
-def _make_run(tmp_path: Path, name: str, shapes: tuple[str, ...] = ("cylindrical",)) -> Path:
-    sweep = json.loads(json.dumps(SWEEP))
-    sweep["shapes"] = {k: v for k, v in sweep["shapes"].items() if k in shapes}
-    yml = tmp_path / f"{name}.yaml"
-    yml.write_text(yaml.safe_dump(sweep))
-    rd = tmp_path / name
-    subprocess.run([*WS, "generate", str(yml), "--out", str(rd)], check=True, capture_output=True)
-    return rd
 
 
 def _run(
@@ -72,21 +47,6 @@ def _run(
         env=env,
         timeout=timeout,
     )
-
-
-def _solve_processes(rd: Path) -> list[int]:
-    """Pids of live `woundsweep solve` processes working on ``rd``: a runner's fork server
-    for ``rd`` and the job processes it forked (their command line is the server's)."""
-    pids = []
-    for d in Path("/proc").iterdir():
-        if d.name.isdigit():
-            try:
-                cmd = (d / "cmdline").read_bytes().split(b"\0")
-            except OSError:
-                continue
-            if {b"solve", FORKSERVER} & set(cmd) and str(rd).encode() in cmd:
-                pids.append(int(d.name))
-    return pids
 
 
 def _assert_each_job_once(rd: Path, stages: int = 1) -> pd.DataFrame:
@@ -183,7 +143,7 @@ def test_stale_jit_lock_from_a_killed_compile_is_recovered(tmp_path: Path) -> No
     proc.wait()
     locks = list(cache.glob("libffcx_forms_*.c"))
     assert len(locks) == 1 and not locks[0].with_suffix(".c.cached").exists()
-    # FFCx itself now waits for that lock and gives up: the message names the lock file.
+    # FFCx itself waits for that lock and gives up: the message names the lock file.
     res = subprocess.run(
         [sys.executable, "-c", _COMPILE, str(cache)], capture_output=True, text=True
     )
@@ -206,7 +166,7 @@ def test_stale_jit_lock_from_a_killed_compile_is_recovered(tmp_path: Path) -> No
 @pytest.mark.fem
 @pytest.mark.slow
 def test_each_fault_lands_in_its_class(tmp_path: Path) -> None:
-    rd = _make_run(tmp_path, "faults")  # 9 jobs, one geometry; job 0 warms up alone
+    rd = make_run(tmp_path, "faults")  # 9 jobs, one geometry; job 0 warms up alone
     faults = "hang@1,segv@2,oom@3,fail@4,exit:2@5,exit:4@6,segv@7#1"
     res = _run(
         rd, "--workers", "2", "--timeout", "30", "--max-memory", "2", "--retries", "1",
@@ -240,7 +200,7 @@ def test_each_fault_lands_in_its_class(tmp_path: Path) -> None:
         assert jobs.loc[i, "status"] == "not-run" and jobs.loc[i, "fields_file"] == ""
     log = (rd / "logs" / f"job-{jobs.loc[7, 'job_id']}.log").read_text()
     assert log.count("attempt 1 ended: crashed") == 1 and "attempt 2 ended: converged" in log
-    assert not _solve_processes(rd) and not list((rd / "tmp").iterdir())
+    assert not solve_processes(rd) and not list((rd / "tmp").iterdir())
 
     # Resume does nothing; --rerun-failed reruns exactly the six failed jobs (faults off now).
     res = _run(rd, "--workers", "2")
@@ -255,7 +215,7 @@ def test_each_fault_lands_in_its_class(tmp_path: Path) -> None:
 @pytest.mark.fem
 @pytest.mark.slow
 def test_kill9_mid_shard_then_resume(tmp_path: Path) -> None:
-    rd = _make_run(tmp_path, "kill", shapes=("cylindrical", "wedge"))  # 18 jobs
+    rd = make_run(tmp_path, "kill", shapes=("cylindrical", "wedge"))  # 18 jobs
     cmd = [*WS, "run", str(rd), "--no-progress", "--stages", "1-1", "--workers", "2"]
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     deadline = time.time() + 600
@@ -266,7 +226,7 @@ def test_kill9_mid_shard_then_resume(tmp_path: Path) -> None:
     os.kill(proc.pid, signal.SIGKILL)
     proc.wait()
     time.sleep(0.5)
-    assert not _solve_processes(rd)  # the jobs died with their runner
+    assert not solve_processes(rd)  # the jobs died with their runner
     # Whatever the instant, the store is readable and holds whole jobs only.
     df = read_results(rd)
     assert (df.groupby("job_id").size() == 1).all()
@@ -315,7 +275,7 @@ def _status_json(rd: Path) -> dict:
 def test_materials_change_recomputes_the_stale_jobs_with_the_solver(tmp_path: Path) -> None:
     """generate --force with other stiff-skin values: only the stiff jobs are redone, and
     their stresses change; the job ids stay."""
-    rd = _make_run(tmp_path, "stale")
+    rd = make_run(tmp_path, "stale")
     assert _run(rd, "--workers", "2").returncode == 0
     before = read_results(rd).set_index("job_id")
     sweep = json.loads(json.dumps(SWEEP))
@@ -343,7 +303,7 @@ def test_materials_change_recomputes_the_stale_jobs_with_the_solver(tmp_path: Pa
 @pytest.mark.fem
 @pytest.mark.slow
 def test_two_shards_at_once_into_one_run_dir(tmp_path: Path) -> None:
-    rd = _make_run(tmp_path, "shards", shapes=("cylindrical", "wedge"))  # 18 jobs, 2 geometries
+    rd = make_run(tmp_path, "shards", shapes=("cylindrical", "wedge"))  # 18 jobs, 2 geometries
     cmd = [*WS, "run", str(rd), "--no-progress", "--stages", "1-1", "--workers", "1"]
     procs = [
         subprocess.Popen(
@@ -371,7 +331,7 @@ def test_two_shards_at_once_into_one_run_dir(tmp_path: Path) -> None:
 @pytest.mark.fem
 @pytest.mark.slow
 def test_job_killed_mid_compile_leaves_a_lock_the_next_run_recovers_from(tmp_path: Path) -> None:
-    rd = _make_run(tmp_path, "jit")
+    rd = make_run(tmp_path, "jit")
     env = dict(os.environ, XDG_CACHE_HOME=str(tmp_path / "cache"))  # a cold, private JIT cache
     cache = tmp_path / "cache" / "fenics"
     # Killed at the timeout while FFCx compiles: through a C compiler that first waits far

@@ -2,29 +2,13 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pandas as pd
 import pytest
 
 from woundsweep.config.geometry import GeometrySpec
-from woundsweep.config.manifest import expand
-from woundsweep.config.sweep import load_sweep
 from woundsweep.execution.shards import Shard, estimate_cost, parse_shard, partition, shard_jobs
 from woundsweep.mesh.build import build_mesh
-
-ROOT = Path(__file__).resolve().parent.parent
-
-
-@pytest.fixture(scope="module")
-def paper() -> pd.DataFrame:
-    return expand(load_sweep(ROOT / "sweeps" / "paper.yaml"))
-
-
-@pytest.fixture(scope="module")
-def demo() -> pd.DataFrame:
-    return expand(load_sweep(ROOT / "sweeps" / "demo.yaml"))
 
 
 def test_cost_estimate_ranks_real_meshes(paper: pd.DataFrame) -> None:
@@ -79,8 +63,8 @@ def test_geometries_stay_together(paper: pd.DataFrame, n: int) -> None:
         assert sorted(np.bincount(owner).tolist()) == [9] * 1296
 
 
-def test_more_shards_than_geometries_splits_jobs(demo: pd.DataFrame) -> None:
-    shards = partition(demo, 20)  # 16 geometries, 32 jobs
+def test_more_shards_than_geometries_splits_jobs(demo_manifest: pd.DataFrame) -> None:
+    shards = partition(demo_manifest, 20)  # 16 geometries, 32 jobs
     assert all(len(s) > 0 for s in shards)
     assert sorted(np.concatenate(shards).tolist()) == list(range(32))
 
@@ -103,10 +87,10 @@ def test_partition_independent_of_row_order(paper: pd.DataFrame) -> None:
         assert np.array_equal(a, b)
 
 
-def test_shard_jobs_rows(demo: pd.DataFrame) -> None:
-    parts = [shard_jobs(demo, Shard(i, 3)) for i in range(3)]
+def test_shard_jobs_rows(demo_manifest: pd.DataFrame) -> None:
+    parts = [shard_jobs(demo_manifest, Shard(i, 3)) for i in range(3)]
     assert sum(len(p) for p in parts) == 32
-    assert set().union(*(set(p["job_id"]) for p in parts)) == set(demo["job_id"])
+    assert set().union(*(set(p["job_id"]) for p in parts)) == set(demo_manifest["job_id"])
     assert all(p["job_index"].is_monotonic_increasing for p in parts)
 
 

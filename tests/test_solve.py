@@ -11,13 +11,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import yaml
+from cli_run import generate_run
 
 from woundsweep.core.errors import SolverError
 from woundsweep.core.schema import StageResult, parse_stage_range
 from woundsweep.physics.job import stress_summary
-
-REPO = Path(__file__).resolve().parent.parent
 
 SMALL_SWEEP = {
     "name": "solve-test",
@@ -145,16 +143,7 @@ def test_stage_result_fields_match_the_design_contract() -> None:
 
 
 def _run_dir(tmp_path: Path, solver: dict | None = None) -> Path:
-    from woundsweep.cli import main
-
-    sweep = dict(SMALL_SWEEP)
-    if solver:
-        sweep["solver"] = solver
-    path = tmp_path / "sweep.yaml"
-    path.write_text(yaml.safe_dump(sweep))
-    run = tmp_path / "run"
-    assert main(["generate", str(path), "--out", str(run)]) == 0
-    return run
+    return generate_run({**SMALL_SWEEP, **({"solver": solver} if solver else {})}, tmp_path)
 
 
 @pytest.fixture(scope="module")
@@ -302,7 +291,7 @@ def test_second_job_with_other_parameters_compiles_nothing(
 @pytest.mark.slow
 def test_cold_cache_compiles_each_form_once_per_machine(run_dir: Path, tmp_path: Path) -> None:
     """Fresh processes on an empty JIT cache: the first job compiles, a second job with other
-    parameters compiles nothing (FFCx 0.5 used to recompile the Jacobian under a new hash)."""
+    parameters compiles nothing (no form, the Jacobian included, gets a new hash)."""
     cache = tmp_path / "xdg"
     env = dict(os.environ, XDG_CACHE_HOME=str(cache), OPENBLAS_NUM_THREADS="1")
     base = [sys.executable, "-m", "woundsweep", "solve", str(run_dir), "--stages", "1-2"]

@@ -6,80 +6,11 @@ ones come from woundsweep.mesh (coarsest size factor).
 
 from __future__ import annotations
 
-from typing import NamedTuple
-
 import numpy as np
 import pytest
-
-from woundsweep.physics.materials import homogeneous_state
+from skin_patch import HALF, SKIN_TYPES, T_D, T_TOTAL, box_patch, homogeneous_field, rel_l2
 
 pytestmark = pytest.mark.fem
-
-SKIN_TYPES = ("normal", "stiff", "soft")
-T_D, T_TOTAL, HALF = 1.0, 2.0, 2.0  # dermis and total thickness, patch half-length (mm)
-
-
-class Patch(NamedTuple):
-    points: np.ndarray
-    cells: np.ndarray
-    cell_tags: np.ndarray
-    facets: np.ndarray
-    facet_tags: np.ndarray
-
-
-def box_patch(n_xy: int = 6, rotate: bool = False) -> Patch:
-    """Two-layer square patch [-HALF, HALF]^2 x [-T_TOTAL, 0], six tets per grid box.
-
-    ``rotate`` turns the points by +90 degrees about z (same cells), for the symmetry test.
-    """
-    xs = np.linspace(-HALF, HALF, n_xy + 1)
-    zs = np.r_[np.linspace(-T_TOTAL, -T_D, 3)[:-1], np.linspace(-T_D, 0.0, 4)]
-    nx, ny, nz = n_xy, n_xy, len(zs) - 1
-    X, Y, Z = np.meshgrid(xs, xs, zs, indexing="ij")
-    pts = np.c_[X.ravel(), Y.ravel(), Z.ravel()]
-    idx = lambda i, j, k: (i * (ny + 1) + j) * (nz + 1) + k  # noqa: E731
-    ii, jj, kk = (a.ravel() for a in np.meshgrid(range(nx), range(ny), range(nz), indexing="ij"))
-    corners = [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0), (0, 0, 1), (1, 0, 1), (1, 1, 1),
-               (0, 1, 1)]  # fmt: skip
-    V = np.stack([idx(ii + a, jj + b, kk + c) for a, b, c in corners], axis=1)
-    tets = [(0, 1, 2, 6), (0, 2, 3, 6), (0, 3, 7, 6), (0, 7, 4, 6), (0, 4, 5, 6), (0, 5, 1, 6)]
-    cells = np.concatenate([V[:, list(t)] for t in tets])
-    if rotate:
-        pts = np.c_[-pts[:, 1], pts[:, 0], pts[:, 2]]
-    mid = pts[cells].mean(axis=1)
-    ctags = np.where(mid[:, 2] > -T_D, 1, 2).astype(np.int32)
-    faces = np.concatenate([cells[:, [1, 2, 3]], cells[:, [0, 2, 3]], cells[:, [0, 1, 3]],
-                            cells[:, [0, 1, 2]]])  # fmt: skip
-    uniq, count = np.unique(np.sort(faces, axis=1), axis=0, return_counts=True)
-    bf = uniq[count == 1]
-    c = pts[bf].mean(axis=1)
-    ft = np.zeros(len(bf), dtype=np.int32)
-    e = 1e-9
-    ft[np.abs(c[:, 0] + HALF) < e], ft[np.abs(c[:, 0] - HALF) < e] = 11, 12
-    ft[np.abs(c[:, 1] + HALF) < e], ft[np.abs(c[:, 1] - HALF) < e] = 13, 14
-    ft[np.abs(c[:, 2] + T_TOTAL) < e], ft[np.abs(c[:, 2]) < e] = 15, 16
-    assert (ft > 0).all()
-    return Patch(pts, cells, ctags, bf, ft)
-
-
-def homogeneous_field(points: np.ndarray, skin: str, angle: float) -> np.ndarray:
-    """Displacement of the per-layer homogeneous pre-stretch (bottom fixed at z = -T_TOTAL)."""
-    from woundsweep.physics.materials import JobMaterials
-
-    mats = JobMaterials.table2(skin, angle)
-    l_d = homogeneous_state(mats.dermis, mats.tsf).lambda3
-    l_s = homogeneous_state(mats.subcutis, mats.tsf).lambda3
-    x, y, z = points.T
-    uz = np.where(
-        z <= -T_D,
-        (l_s - 1) * (z + T_TOTAL),
-        (l_s - 1) * (T_TOTAL - T_D) + (l_d - 1) * (z + T_D),
-    )
-    return np.c_[(mats.tsf - 1) * x, (mats.tsf - 1) * y, uz]
-
-
-def rel_l2(a: np.ndarray, b: np.ndarray) -> float:
-    return float(np.linalg.norm(a - b) / np.linalg.norm(b))
 
 
 @pytest.fixture(scope="module")
@@ -87,15 +18,6 @@ def box_model():
     from woundsweep.physics.stages import WoundModel
 
     return WoundModel(box_patch())
-
-
-@pytest.fixture(scope="module")
-def cylinder_mesh():
-    from woundsweep.config.geometry import GeometrySpec
-    from woundsweep.mesh.build import build_mesh
-
-    # t_d = 1, subcutis factor 1, patch factor 2 (L = 4), width factor 0.3, aspect 0, m = 0.3
-    return build_mesh(GeometrySpec.cylindrical(1.0, 1.0, 4.0, 1.2, 0.0, 0.3))
 
 
 @pytest.mark.parametrize("skin", SKIN_TYPES)

@@ -38,12 +38,6 @@ FEATURES = [
 ]  # fmt: skip
 
 
-def run_cli(capsys: pytest.CaptureFixture[str], *args: object) -> tuple[int, str, str]:
-    rc = main([str(a) for a in args])
-    out, err = capsys.readouterr()
-    return rc, out, err
-
-
 @pytest.fixture(scope="module")
 def analyzed(tmp_path_factory: pytest.TempPathFactory) -> Path:
     rd = tmp_path_factory.mktemp("surrogate") / "run"
@@ -82,12 +76,12 @@ def _training_row(rd: Path, shape: str) -> pd.Series:
 
 @pytest.mark.parametrize("shape", ["wedge", "cylindrical"])
 def test_predict_interval_contains_the_saved_surrogates_estimate(
-    analyzed: Path, shape: str, capsys: pytest.CaptureFixture[str]
+    analyzed: Path, shape: str, run_main
 ) -> None:
     import xgboost as xgb
 
     row = _training_row(analyzed, shape)
-    rc, out, err = run_cli(capsys, "predict", analyzed, *_args(row), "--json", "--level", "0.8")
+    rc, out, err = run_main("predict", analyzed, *_args(row), "--json", "--level", "0.8")
     assert rc == 0, err
     answer = json.loads(out)
     (pred,) = answer["predictions"]
@@ -104,7 +98,7 @@ def test_predict_interval_contains_the_saved_surrogates_estimate(
     assert pred["stress_kPa"] == pytest.approx(math.exp(log_est), rel=1e-6)
     # Symmetric in log stress: the estimate is the geometric mean of the bounds.
     assert math.sqrt(lo * hi) == pytest.approx(pred["stress_kPa"], rel=1e-9)
-    rc, out, _ = run_cli(capsys, "predict", analyzed, *_args(row), "--json", "--level", "0.95")
+    rc, out, _ = run_main("predict", analyzed, *_args(row), "--json", "--level", "0.95")
     lo95, hi95 = json.loads(out)["predictions"][0]["interval_kPa"]
     assert lo95 <= lo and hi95 >= hi
     assert answer["interpolated"] == [] and pred["extrapolated"] == []
@@ -112,18 +106,16 @@ def test_predict_interval_contains_the_saved_surrogates_estimate(
     assert answer["failure_note"].startswith("no failure model: 0 of 108 jobs failed")
 
 
-def test_predict_flags_an_orientation_between_the_grid_values(
-    analyzed: Path, capsys: pytest.CaptureFixture[str]
-) -> None:
+def test_predict_flags_an_orientation_between_the_grid_values(analyzed: Path, run_main) -> None:
     row = _training_row(analyzed, "wedge")
-    rc, out, err = run_cli(capsys, "predict", analyzed, *_args(row, orientation_deg=25))
+    rc, out, err = run_main("predict", analyzed, *_args(row, orientation_deg=25))
     assert rc == 0, err
     assert "stress" in out and "% interval" in out and "failure probability: n/a" in out
     assert (
         "INTERPOLATED" in out
         and "orientation_deg=25 (interpolated between trained values 0 and 45)" in out
     )
-    rc, _, err = run_cli(capsys, "predict", analyzed, *_args(row), "--level", "1.5")
+    rc, _, err = run_main("predict", analyzed, *_args(row), "--level", "1.5")
     assert rc == 2 and len(err.strip().splitlines()) == 1 and "interval level 1.5" in err
 
 

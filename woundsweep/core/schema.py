@@ -36,6 +36,7 @@ __all__ = [
     "Y_MIN",
     "ExitCode",
     "FailureClass",
+    "ResultState",
     "StageResult",
     "StageStatus",
     "parse_stage_range",
@@ -114,6 +115,16 @@ class StageStatus(_Text):
     INVERTED = "inverted"
     LINEAR_SOLVER_FAILED = "linear-solver-failed"
     NOT_RUN = "not-run"
+
+
+class ResultState(_Text):
+    """What a job's stored result is for the current sweep (`woundsweep.store.reader`)."""
+
+    MISSING = "missing"  # no result file
+    DONE = "done"  # valid, of the current fingerprint, with its files intact
+    STALE = "stale"  # another result format, fingerprint or stage range
+    CORRUPT = "corrupt"  # the result file fails validation
+    DAMAGED = "damaged"  # its fields or mesh file is missing or altered
 
 
 class FailureClass(_Text):

@@ -37,7 +37,7 @@ import pandas as pd
 from ..config.manifest import load_run
 from ..core.errors import StoreError, WoundsweepError
 from ..core.faults import ATTEMPT_ENV
-from ..core.schema import FailureClass
+from ..core.schema import FailureClass, ResultState
 from ..store.writer import AttemptOutcome, Store
 from .classify import TRANSIENT_CLASSES, classify
 from .forkserver import ForkServer, JobRequest
@@ -220,7 +220,7 @@ class _Runner:
             return False
         job.next_lock_check = time.time() + 2.0  # the check scans /proc: not every poll
         state = lock_state(lock, self.opts.jit_stale_after_s)
-        if state == "stale":
+        if state == ResultState.STALE:
             break_lock(lock)
         if state != "held":
             job.wait_for_lock = None
@@ -281,10 +281,13 @@ def run_shard(run_dir: str | Path, opts: RunOptions) -> RunSummary:
     for row in _order(shard, opts.warmup):
         jid = str(row["job_id"])
         st = store.job_state(jid, opts.stages, store.fingerprint(row))
-        if st.state in ("corrupt", "damaged"):  # damaged: its fields or mesh file go too
-            moved = store.quarantine(jid, files=st.state == "damaged")
+        if st.state in (
+            ResultState.CORRUPT,
+            ResultState.DAMAGED,
+        ):  # damaged: its fields or mesh file go too
+            moved = store.quarantine(jid, files=st.state == ResultState.DAMAGED)
             print(f"woundsweep run: {st.reason}; moved to {moved}, rerunning", file=sys.stderr)
-        elif st.state == "done" and not (
+        elif st.state == ResultState.DONE and not (
             opts.rerun_failed and st.failure_class != FailureClass.CONVERGED
         ):
             skipped += 1

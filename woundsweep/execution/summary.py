@@ -7,13 +7,13 @@ from typing import Any
 
 import pandas as pd
 
-from ..core.schema import FailureClass, StageStatus
+from ..core.schema import FailureClass, ResultState, StageStatus
 from ..store.reader import StoreScan
 from .shards import estimate_cost
 
 __all__ = ["summarize"]
 
-_BAD = ("corrupt", "damaged")  # result states that count as damaged
+_BAD = (ResultState.CORRUPT, ResultState.DAMAGED)  # result states counted as damaged
 
 
 def summarize(
@@ -57,8 +57,10 @@ def summarize(
         "jobs_pending": int(len(pending)),
         "rows": int(len(rows)),
         "orphan_jobs": orphans if scan is None else len(scan.orphans),
-        "jobs_stale": 0 if scan is None else scan.count("stale"),
-        "jobs_damaged": 0 if scan is None else scan.count("corrupt") + scan.count("damaged"),
+        "jobs_stale": 0 if scan is None else scan.count(ResultState.STALE),
+        "jobs_damaged": 0
+        if scan is None
+        else scan.count(ResultState.CORRUPT) + scan.count(ResultState.DAMAGED),
         "damaged_example": next(
             (c.reason for c in (scan.checks.values() if scan else ()) if c.state in _BAD), None
         ),

@@ -26,7 +26,7 @@ import pyarrow.parquet as pq
 from ..config.manifest import load_run
 from ..config.sweep import MANIFEST_COLUMNS
 from ..core.errors import StoreError
-from ..core.schema import stage_field_kinds
+from ..core.schema import ResultState, stage_field_kinds
 from ..core.versions import RESULT_FORMAT_VERSION
 from .identity import file_sha256, fingerprints
 
@@ -203,9 +203,9 @@ def check_files(
 
 
 class ResultCheck(NamedTuple):
-    """One stored result: ``state`` is ``done``, ``stale``, ``corrupt`` or ``damaged``."""
+    """One stored result's `ResultState` (never ``missing``), why, and its footer."""
 
-    state: str
+    state: ResultState
     reason: str = ""
     meta: dict[str, Any] | None = None
 
@@ -223,21 +223,21 @@ def check_result(
     another fingerprint than ``fingerprint``), damaged (its fields or mesh file), or done."""
     footer = read_footer(path) if path.is_file() else None
     if footer is not None and (reason := stale_reason(footer)):
-        return ResultCheck("stale", reason)
+        return ResultCheck(ResultState.STALE, reason)
     try:
         meta = validate_result_file(path, job_id, run_dir, verify_files=False)
     except FilesDamaged as err:  # the Parquet file is whole: its fields or mesh file is not
-        return ResultCheck("damaged", str(err), read_footer(path))
+        return ResultCheck(ResultState.DAMAGED, str(err), read_footer(path))
     except StoreError as err:
-        return ResultCheck("corrupt", str(err))
+        return ResultCheck(ResultState.CORRUPT, str(err))
     if reason := stale_reason(meta, fingerprint):
-        return ResultCheck("stale", reason, meta)
+        return ResultCheck(ResultState.STALE, reason, meta)
     if verify_files:
         try:
             check_files(path, meta, run_dir, verify=True, memo=memo)
         except FilesDamaged as err:
-            return ResultCheck("damaged", str(err), meta)
-    return ResultCheck("done", "", meta)
+            return ResultCheck(ResultState.DAMAGED, str(err), meta)
+    return ResultCheck(ResultState.DONE, "", meta)
 
 
 def result_files(run_dir: Path) -> tuple[dict[str, Path], list[Path]]:
@@ -262,7 +262,7 @@ class StoreScan(NamedTuple):
     orphans: list[str]
     stray: list[Path]
 
-    def count(self, state: str) -> int:
+    def count(self, state: ResultState) -> int:
         return sum(c.state == state for c in self.checks.values())
 
 
@@ -325,4 +325,6 @@ def read_results(run_dir: str | Path, job_ids: Iterable[str] | None = None) -> p
 
 def scan_results(scan: StoreScan) -> pd.DataFrame:
     """The rows of the results a scan found done (what `woundsweep status` counts)."""
-    return _frame([c.meta["_table"] for c in scan.checks.values() if c.state == "done" and c.meta])
+    return _frame(
+        [c.meta["_table"] for c in scan.checks.values() if c.state == ResultState.DONE and c.meta]
+    )

@@ -48,7 +48,7 @@ from ..config.sweep import MANIFEST_COLUMNS, Sweep, load_sweep
 from ..core.diagnostics import StageReport
 from ..core.errors import StoreError
 from ..core.fsutil import atomic_write
-from ..core.schema import FailureClass, StageResult, StageStatus
+from ..core.schema import FailureClass, ResultState, StageResult, StageStatus
 from ..core.versions import RESULT_FORMAT_VERSION
 from .identity import file_sha256, fingerprints, result_fingerprint
 from .reader import META_KEY, check_result, content_digest, read_footer, result_schema
@@ -82,11 +82,9 @@ class AttemptOutcome(NamedTuple):
 
 
 class JobState(NamedTuple):
-    """Resume bookkeeping for one job: ``state`` is ``missing``, ``done``, ``stale`` (other
-    stages or other settings), ``corrupt`` (the Parquet file) or ``damaged`` (its fields or
-    mesh file)."""
+    """Resume bookkeeping for one job: its `ResultState`, stored failure class and why."""
 
-    state: str
+    state: ResultState
     failure_class: str | None = None
     reason: str = ""
 
@@ -180,7 +178,7 @@ class Store:
         """
         path = self.result_path(job_id)
         if not path.exists():
-            return JobState("missing")
+            return JobState(ResultState.MISSING)
         if fingerprint is None:
             if self._expected is None:
                 run = load_run(self.run_dir)
@@ -188,12 +186,12 @@ class Store:
             fingerprint = self._expected.get(job_id)
         chk = check_result(path, job_id, self.run_dir, fingerprint, memo=self._memo)
         meta = chk.meta or {}
-        if chk.state != "done":
+        if chk.state != ResultState.DONE:
             return JobState(chk.state, meta.get("failure_class"), chk.reason)
         lo, hi = meta["stages"]
         if lo > stages[0] or hi < stages[1]:
-            return JobState("stale", meta["failure_class"], f"has stages {lo}-{hi}")
-        return JobState("done", meta["failure_class"])
+            return JobState(ResultState.STALE, meta["failure_class"], f"has stages {lo}-{hi}")
+        return JobState(ResultState.DONE, meta["failure_class"])
 
     def quarantine(self, job_id: str, files: bool = False) -> Path | None:
         """Move a result file that failed validation to RUN_DIR/corrupt/ (kept for inspection).

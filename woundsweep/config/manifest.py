@@ -14,7 +14,7 @@ import json
 import math
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import Any, NamedTuple, TypedDict
 
 import numpy as np
 import pandas as pd
@@ -34,7 +34,32 @@ from .sweep import (
     load_sweep,
 )
 
-__all__ = ["Run", "canonical_hash", "count_jobs", "expand", "load_run"]
+__all__ = ["JobRow", "Run", "canonical_hash", "count_jobs", "expand", "load_run"]
+
+
+class JobRow(TypedDict):
+    """One manifest row (`MANIFEST_COLUMNS`; lengths in mm). The shape's own factor is NaN for
+    the other shape: ``wound_depth_factor`` for a cylinder, ``wound_aspect_factor`` for a
+    wedge."""
+
+    job_index: int
+    job_id: str
+    geometry_id: str
+    wound_shape: str
+    dermal_thickness_mm: float
+    subcutis_thickness_factor: float
+    patch_size_factor: float
+    wound_width_factor: float
+    mesh_size_factor: float
+    wound_depth_factor: float
+    wound_aspect_factor: float
+    orientation_deg: float
+    skin_type: str
+    subcutis_thickness_mm: float
+    total_thickness_mm: float
+    patch_half_length_mm: float
+    wound_width_mm: float
+    wound_depth_mm: float
 
 
 def canonical_hash(params: dict[str, Any]) -> str:
@@ -142,14 +167,15 @@ class Run(NamedTuple):
     sweep: Sweep
     manifest: pd.DataFrame
 
-    def job(self, job_index: int) -> dict[str, Any]:
+    def job(self, job_index: int) -> JobRow:
         """The manifest row of ``job_index`` as a dict of plain values (StoreError if none)."""
         hit = self.manifest[self.manifest["job_index"] == int(job_index)]
         if hit.empty:
             raise StoreError(f"no job {job_index} (the run has jobs 0-{len(self.manifest) - 1})")
-        return {k: (v.item() if isinstance(v, np.generic) else v) for k, v in hit.iloc[0].items()}
+        row = {k: (v.item() if isinstance(v, np.generic) else v) for k, v in hit.iloc[0].items()}
+        return row  # type: ignore[return-value]
 
-    def geometry(self, row: Mapping[str, Any]) -> GeometrySpec:
+    def geometry(self, row: JobRow | Mapping[str, Any]) -> GeometrySpec:
         """The `GeometrySpec` of a manifest row with the sweep's closure zone and element
         degree (both part of the mesh); GeometryError names the job."""
         return GeometrySpec.from_row(

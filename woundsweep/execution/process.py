@@ -16,7 +16,10 @@ import signal
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from ..config.manifest import JobRow
 
 __all__ = [
     "JOB_NAME",
@@ -46,7 +49,7 @@ _LIBC = ctypes.CDLL(None, use_errno=True)  # resolved now, not in the forked chi
 class Job:
     """A job of the shard and what its attempts so far have cost."""
 
-    row: dict[str, Any]
+    row: JobRow
     attempts: int = 0
     total_wall_s: float = 0.0
     total_cpu_s: float = 0.0

@@ -34,7 +34,7 @@ from typing import Any, NamedTuple
 
 import pandas as pd
 
-from ..config.manifest import load_run
+from ..config.manifest import JobRow, load_run
 from ..core.errors import StoreError, WoundsweepError
 from ..core.faults import ATTEMPT_ENV
 from ..core.schema import FailureClass, ResultState
@@ -228,7 +228,7 @@ class _Runner:
         return False
 
 
-def _store(store: Store, row: dict[str, Any], outcome: AttemptOutcome, opts: RunOptions) -> None:
+def _store(store: Store, row: JobRow, outcome: AttemptOutcome, opts: RunOptions) -> None:
     """Write the job; output that validated but cannot be stored makes it ``crashed``."""
     try:
         store.write_job(row, outcome, opts.stages, opts.fields, str(opts.shard))

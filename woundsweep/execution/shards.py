@@ -12,11 +12,12 @@ from __future__ import annotations
 import heapq
 import math
 import re
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import numpy as np
 import pandas as pd
 
+from ..config.manifest import JobRow
 from ..config.sweep import DERIVED, GEOMETRY_KEYS
 from ..core.errors import WoundsweepError
 
@@ -52,7 +53,7 @@ def parse_shard(text: str) -> Shard:
 _GRID = 8
 
 
-def _cells_estimate(row: dict[str, Any]) -> float:
+def _cells_estimate(row: JobRow) -> float:
     """Integral of 1 / V_tet(h) over the patch, h the mesh size law (`mesh.sizing`)."""
     from ..config.geometry import GeometrySpec
     from ..mesh.sizing import mesh_size_mm

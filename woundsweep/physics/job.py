@@ -35,7 +35,7 @@ from ..core.schema import ExitCode, StageResult, StageStatus, start_stage
 from .profiles import line_maxima, locate_cells, profile_lines, sample_profiles
 
 if TYPE_CHECKING:
-    from ..config.manifest import Run
+    from ..config.manifest import JobRow, Run
     from .forms import StressSamples
     from .materials import JobMaterials
     from .stages import WoundModel
@@ -277,7 +277,7 @@ def write_output(
 
 
 def job_model(
-    run: Run, row: Mapping[str, Any], mesh: Any, jit: dict[str, Any] | None = None
+    run: Run, row: JobRow, mesh: Any, jit: dict[str, Any] | None = None
 ) -> tuple[WoundModel, JobMaterials]:
     """The `WoundModel` of a manifest row on ``mesh`` with the run's settings, and the job's
     materials (GeometryError for a mesh that does not fit the contract)."""

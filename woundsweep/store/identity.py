@@ -18,6 +18,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+from ..config.manifest import JobRow
 from ..config.sweep import GEOMETRY_KEYS, Sweep
 from ..core.versions import MESH_LAW_VERSION, RESULT_FORMAT_VERSION, STATISTICS_VERSION
 
@@ -42,7 +43,7 @@ def _plain(v: Any) -> Any:
     return str(v)
 
 
-def result_fingerprint(sweep: Sweep, job: Mapping[str, Any]) -> str:
+def result_fingerprint(sweep: Sweep, job: JobRow | Mapping[str, Any]) -> str:
     """sha256 (64 hex digits) of the job's parameters and the settings its result depends on.
 
     ``job`` is a manifest row. The analysis settings and the sweep's name are not part of it.

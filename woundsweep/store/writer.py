@@ -43,7 +43,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from .. import __version__
-from ..config.manifest import load_run
+from ..config.manifest import JobRow, load_run
 from ..config.sweep import MANIFEST_COLUMNS, Sweep, load_sweep
 from ..core.diagnostics import StageReport
 from ..core.errors import StoreError
@@ -165,7 +165,7 @@ class Store:
             self._sweep = load_sweep(self.run_dir / "sweep.yaml")
         return self._sweep
 
-    def fingerprint(self, job: dict[str, Any]) -> str:
+    def fingerprint(self, job: JobRow) -> str:
         return result_fingerprint(self.sweep, job)
 
     # ---- resume bookkeeping -------------------------------------------------------------
@@ -309,7 +309,7 @@ class Store:
 
     def write_job(
         self,
-        job: dict[str, Any],
+        job: JobRow,
         outcome: AttemptOutcome,
         stages: tuple[int, int],
         fields: str,

@@ -17,7 +17,7 @@ from typing import Any, NamedTuple
 import numpy as np
 import pandas as pd
 
-from ..config.manifest import Run
+from ..config.manifest import JobRow, Run
 from ..core.errors import StoreError
 from ..core.schema import StageStatus
 from ..store.solverfile import MESH_GROUP, STAGE_DATASETS, stage_group
@@ -38,7 +38,7 @@ class StageNote(NamedTuple):
 class JobFields(NamedTuple):
     """A job's reference mesh (input numbering), tags, closure zone and stored fields."""
 
-    job: dict[str, Any]  # the manifest row
+    job: JobRow  # the manifest row
     rows: list[dict[str, Any]]  # the job's result rows, one per requested stage, by stage
     points: np.ndarray  # (n, 3) float64 mm
     cells: np.ndarray  # (m, 4) int64
@@ -90,7 +90,7 @@ def _read_h5(path: Path) -> tuple[dict[str, Any], dict[str, dict[str, np.ndarray
     return attrs, groups
 
 
-def _mesh_arrays(run: Run, job: dict[str, Any], groups: dict[str, Any], mesh_file: str):
+def _mesh_arrays(run: Run, job: JobRow, groups: dict[str, Any], mesh_file: str):
     if MESH_GROUP in groups:
         mesh = groups[MESH_GROUP]
     elif not groups:  # no fields stored (`run --fields none`, or no converged stage)
@@ -113,13 +113,13 @@ def _mesh_arrays(run: Run, job: dict[str, Any], groups: dict[str, Any], mesh_fil
         raise StoreError(f"the stored mesh of job {job['job_index']} lacks {err}") from None
 
 
-def _cached_mesh(run: Run, job: dict[str, Any]) -> Any:
+def _cached_mesh(run: Run, job: JobRow) -> Any:
     from ..mesh.cache import get_mesh
 
     return get_mesh(run.run_dir, str(job["geometry_id"]), run.geometry(job))
 
 
-def _boundary(run: Run, job: dict[str, Any], points: np.ndarray, cells: np.ndarray):
+def _boundary(run: Run, job: JobRow, points: np.ndarray, cells: np.ndarray):
     """Facets and facet tags from the mesh cache (built if missing), checked against the store."""
     got = _cached_mesh(run, job)
     m = got.mesh
@@ -137,7 +137,7 @@ def _boundary(run: Run, job: dict[str, Any], points: np.ndarray, cells: np.ndarr
 
 def load_job(
     run: Run,
-    job: dict[str, Any],
+    job: JobRow,
     rows: pd.DataFrame | list[dict[str, Any]],
     cache: dict[Any, Any] | None = None,
 ) -> JobFields:

@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from ..config.manifest import JobRow
 from ..config.sweep import MANIFEST_COLUMNS
 from ..core.schema import STAGE_NAMES
 from .html import JOB_COLUMNS, STAGE_COLUMNS, asset, json_script, page, plotly_js, table
@@ -96,14 +97,14 @@ def stage_rows(rows: list[dict[str, Any]], notes: list[StageNote] | None) -> lis
     return out
 
 
-def _param_table(job: dict[str, Any], rows: list[dict[str, Any]]) -> str:
+def _param_table(job: JobRow, rows: list[dict[str, Any]]) -> str:
     items = [(c, job.get(c)) for c in MANIFEST_COLUMNS]
     items += [(c, rows[0].get(c)) for c in JOB_COLUMNS if rows]
     return table(["parameter", "value"], items, "params")
 
 
 def job_body(
-    job: dict[str, Any],
+    job: JobRow,
     rows: list[dict[str, Any]],
     jf: JobFields | None,
     *,

@@ -23,13 +23,14 @@ def _module_name(path: Path) -> str:
     return ".".join(parts)
 
 
-def _module_imports(path: Path) -> set[str]:
-    """The woundsweep modules ``path`` imports when it is loaded (module level only: imports
-    inside functions run later and cannot form a cycle at import time)."""
+def _imports(path: Path, *, everywhere: bool) -> set[str]:
+    """The woundsweep names ``path`` imports: each module, and each ``module.name`` of a
+    from-import; at module level, or ``everywhere`` (inside functions too)."""
     name = _module_name(path)
     package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+    tree = ast.parse(path.read_text())
     found: set[str] = set()
-    for node in ast.parse(path.read_text()).body:
+    for node in ast.walk(tree) if everywhere else tree.body:
         if isinstance(node, ast.Import):
             found.update(a.name for a in node.names if a.name.startswith("woundsweep"))
         elif isinstance(node, ast.ImportFrom):
@@ -42,6 +43,14 @@ def _module_imports(path: Path) -> set[str]:
                 continue
             found.add(target)
             found.update(f"{target}.{a.name}" for a in node.names)
+    return found
+
+
+def _module_imports(path: Path) -> set[str]:
+    """The woundsweep modules ``path`` imports when it is loaded (module level only: imports
+    inside functions run later and cannot form a cycle at import time)."""
+    name = _module_name(path)
+    found = _imports(path, everywhere=False)
     # Importing a.b.c runs the __init__ of a and a.b first, unless they are packages of this
     # module (already being imported when it runs).
     parents = {m.rsplit(".", k)[0] for m in found for k in range(1, m.count(".") + 1)}
@@ -91,35 +100,15 @@ def _unit(module: str) -> str:
     return parts[1] if len(parts) > 1 else "__init__"
 
 
-def _all_imports(path: Path) -> set[str]:
-    """Every woundsweep module ``path`` imports, at module level or inside a function."""
-    name = _module_name(path)
-    package = name if path.name == "__init__.py" else name.rpartition(".")[0]
-    found: set[str] = set()
-    for node in ast.walk(ast.parse(path.read_text())):
-        if isinstance(node, ast.Import):
-            found.update(a.name for a in node.names if a.name.startswith("woundsweep"))
-        elif isinstance(node, ast.ImportFrom):
-            if node.level:
-                base = package.rsplit(".", node.level - 1)[0] if node.level > 1 else package
-                target = f"{base}.{node.module}" if node.module else base
-            else:
-                target = node.module or ""
-            if target == "woundsweep":  # `from .. import compat`: the names are the modules
-                found.update(f"{target}.{a.name}" for a in node.names)
-            elif target.startswith("woundsweep"):
-                found.add(target)
-    return found
-
-
 def test_imports_run_down_the_layers() -> None:
     modules = {_module_name(p): p for p in PACKAGE.rglob("*.py")}
     assert {_unit(m) for m in modules} - {"__version__"} <= set(RANK)
     upward = []
     for name, path in sorted(modules.items()):
-        for target in sorted(_all_imports(path)):
+        for target in sorted(_imports(path, everywhere=True)):
             src, dst = _unit(name), _unit(target)
-            if dst == "__version__" or src == dst:
+            # The root package holds only `__version__`, which every layer may read.
+            if target == "woundsweep" or dst == "__version__" or src == dst:
                 continue
             if RANK[dst] >= RANK[src] and not (RANK[src] == RANK["cli"] == RANK[dst]):
                 upward.append(f"{name} -> {target}")

@@ -95,15 +95,10 @@ class WoundProblem:
     def jacobian(self, A: PETSc.Mat) -> None:
         c = self._contact_on()
         if A is not self.A:  # not the problem's matrix: its pattern grows by insertion
-            compat.assemble_matrix(A, self.forms.a_form)
+            compat.assemble_matrix(A, self.forms.a_form, finalize=c is None)
             if c is not None:
-                K = c.tangent_csr(self.solution())
-                t0 = time.perf_counter()
-                if K.nnz:
-                    add_csr(A, K)
-                c.assembly_time_s += time.perf_counter() - t0
-                if self.tie is not None and self.tie.active:
-                    add_csr(A, self.tie.tangent_csr(c.k_V_kPa))
+                self._add_contact(A, c, c.tangent_csr(self.solution()))
+                A.assemble()
             return
         if c is None:
             if self._pattern_version is not None:  # a contact episode ended
@@ -126,12 +121,7 @@ class WoundProblem:
         M = self._B if self._B is not None else A
         compat.assemble_matrix(M, self.forms.a_form, finalize=False)
         if c is not None:
-            t0 = time.perf_counter()
-            if K is not None and K.nnz:
-                add_csr(M, K, finalize=False)
-            c.assembly_time_s += time.perf_counter() - t0
-            if self.tie is not None and self.tie.active:
-                add_csr(M, self.tie.tangent_csr(c.k_V_kPa), finalize=False)
+            self._add_contact(M, c, K)
         M.assemble()
         if M is A:
             return
@@ -143,6 +133,16 @@ class WoundProblem:
             self._B_nnz = nnz
         # The copy keeps A's structure (the same as M's), so MUMPS keeps its analysis.
         M.convert(A.getType(), out=A)
+
+    def _add_contact(self, M: PETSc.Mat, c: ContactModel, K: Any) -> None:
+        """Add the contact tangent ``K`` and the tie's to ``M``, unfinalised (entries outside
+        its pattern are inserted)."""
+        t0 = time.perf_counter()
+        if K is not None and K.nnz:
+            add_csr(M, K, finalize=False)
+        c.assembly_time_s += time.perf_counter() - t0
+        if self.tie is not None and self.tie.active:
+            add_csr(M, self.tie.tangent_csr(c.k_V_kPa), finalize=False)
 
     @staticmethod
     def _structure_of(A: PETSc.Mat) -> Any:

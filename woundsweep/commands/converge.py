@@ -28,7 +28,7 @@ __all__ = ["cmd", "study_lines"]
 _SHORT = {
     "p99_von_mises_kPa": "p99 vM kPa",
     "max_von_mises_kPa": "max vM kPa",
-    "closure_gap_mm": "gap mm",
+    "closure_gap_max_mm": "gap mm",
     "contact_force_mN": "contact mN",
     "closure_force_left_mN": "closure mN",
     "closure_traction_kPa": "tau kPa",

@@ -47,7 +47,7 @@ __all__ = [
 QUANTITIES = (
     "p99_von_mises_kPa",
     "max_von_mises_kPa",
-    "closure_gap_mm",
+    "closure_gap_max_mm",
     "contact_force_mN",
     "closure_force_left_mN",
     "closure_traction_kPa",

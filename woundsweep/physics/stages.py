@@ -30,8 +30,8 @@ from ..contact import GPA_TO_KPA, ContactModel, FlankContact, ZoneTie, split_wou
 from ..core.schema import DERMIS, STAGES, SUBCUTIS, StageStatus, start_stage
 from ..solver.continuation import ContinuationResult, LoadState, continuation
 from ..solver.newton import NewtonSolver, Policy
-from .domain import WoundDomain, dof_rows
 from .closure import ClosureLine
+from .domain import WoundDomain, dof_rows
 from .forms import WoundForms
 from .materials import HomogeneousState, JobMaterials, homogeneous_state
 from .problem import WoundProblem

@@ -72,6 +72,7 @@ def run_analysis(
     out_dir: str | Path | None = None,
     echo: Callable[[str], None] | None = None,
     drop_interpenetrating: bool = False,
+    keep_reopened: bool = False,
 ) -> AnalysisOutput:
     """Fit and evaluate each scheme; write metrics, models, figures and report.md.
 
@@ -95,7 +96,7 @@ def run_analysis(
     settings = resolve_settings(sweep_analysis, overrides)
     q = settings.quantiles
     results, orphans = drop_orphans(load_results(rd), rd)
-    rows, counts = select_rows(results, drop_interpenetrating)
+    rows, counts = select_rows(results, drop_interpenetrating, keep_reopened)
     counts["rows_not_in_manifest"] = orphans
     if len(rows) < MIN_ROWS_PER_QUANTILE * q:
         raise AnalysisError(

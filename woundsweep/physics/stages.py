@@ -356,6 +356,7 @@ class WoundModel:
         k_from = min(k_from, k_to)
         if stage == 4:
             u[:] = self.displacements[start_stage(4)]
+            self.problem.closure_load = self.closing_forces  # whatever stage 3 did
             if self.tie is not None:  # the closed zone is tied where stage 2 closed it
                 self.tie.set_reference(u)
         c.reset_timers()

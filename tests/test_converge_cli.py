@@ -39,7 +39,7 @@ def test_converge_writes_levels_orders_and_a_figure(run_dir: Path, capsys) -> No
     args = ["converge", str(run_dir), "--job", "0", "--levels", "3", "--ratio", "1.3"]
     assert main([*args, "--stages", "1-3"]) == 0
     out = capsys.readouterr().out
-    assert "p99 vM kPa" in out and "tau kPa" in out and "GCI %" in out
+    assert "p99 vM kPa" in out and "closing kPa" in out and "GCI %" in out
     study = json.loads((run_dir / "convergence" / "job_0.json").read_text())
     levels = study["levels"]
     assert [lv["mesh_size_factor"] for lv in levels] == pytest.approx([0.2, 0.26, 0.338])

@@ -31,7 +31,8 @@ _SHORT = {
     "closure_gap_max_mm": "gap mm",
     "contact_force_mN": "contact mN",
     "closure_force_left_mN": "closure mN",
-    "closure_traction_kPa": "tau kPa",
+    "closure_traction_kPa": "closing kPa",
+    "closing_line_load_max_mN_per_mm": "line mN/mm",
 }
 
 

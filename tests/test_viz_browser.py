@@ -164,11 +164,14 @@ def test_view_renders_and_switches_stage(driver, site, tmp_path: Path) -> None:
     n_full = driver.execute_script("return document.getElementById('plot').data[0].i.length;")
     driver.execute_script("document.getElementById('cut').click();")
     n_cut = driver.execute_script("return document.getElementById('plot').data[0].i.length;")
-    data = driver.execute_script("return JSON.parse(document.getElementById('wsdata').textContent).cut.n_triangles;")
+    data = driver.execute_script(
+        "return JSON.parse(document.getElementById('wsdata').textContent).cut.n_triangles;"
+    )
     assert data > 0 and n_cut != n_full and n_cut > data
-    assert driver.execute_script(
-        "return document.getElementById('lines').layout.title.text;"
-    ) == "no profile lines stored"
+    assert (
+        driver.execute_script("return document.getElementById('lines').layout.title.text;")
+        == "no profile lines stored"
+    )
     names = driver.execute_script("return document.getElementById('plot').data.map(t => t.name);")
     assert names == ["surface", "closure zone", "max von Mises"]
     assert console_errors(driver) == []

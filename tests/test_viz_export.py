@@ -22,8 +22,8 @@ from woundsweep.mesh.cache import load_mesh, mesh_path
 from woundsweep.viz.surface import closure_zone_facets, surface_of
 
 vtk = pytest.importorskip("vtk", reason="vtk (the independent VTU reader) is not installed")
-from vtkmodules.util.numpy_support import vtk_to_numpy  # noqa: E402
 from vtk_render import render_surface  # noqa: E402
+from vtkmodules.util.numpy_support import vtk_to_numpy  # noqa: E402
 
 _TETRA, _TRIANGLE = 10, 5
 
@@ -103,7 +103,9 @@ def test_round_trip_read_by_vtk(store: Path, tmp_path: Path, capsys) -> None:
         np.testing.assert_array_equal(vol["conn"].reshape(-1, 4), mesh.cells)
         assert (srf["types"] == _TRIANGLE).all() and len(srf["types"]) == len(mesh.facets)
         # The surface's own nodes are the facets' nodes, in the same triangles.
-        np.testing.assert_array_equal(srf["points"][srf["conn"].reshape(-1, 3)], mesh.points[mesh.facets])
+        np.testing.assert_array_equal(
+            srf["points"][srf["conn"].reshape(-1, 3)], mesh.points[mesh.facets]
+        )
         # The store's float32 fields exactly, and the fixture's known fields to float32.
         u, vm = stored[k]
         np.testing.assert_array_equal(vol["displacement_mm"], u)
@@ -126,7 +128,9 @@ def test_round_trip_read_by_vtk(store: Path, tmp_path: Path, capsys) -> None:
         # Units ride along in the field data, one per array.
         assert vol["units"]["cauchy_stress_kPa"] == "kPa" and vol["units"]["det_F"] == "1"
         assert srf["units"]["displacement_mm"] == "mm"
-        assert set(srf["units"]) == {k for k in srf if k not in ("points", "types", "conn", "units")}
+        assert set(srf["units"]) == {
+            k for k in srf if k not in ("points", "types", "conn", "units")
+        }
         # Derived fields against the solver's own constitutive law (physics.materials).
         _check_derived(vol, mesh, u, job, run)
         flank = np.isin(mesh.facet_tags, WOUND_TAGS)
@@ -161,7 +165,10 @@ def _check_derived(vol: dict, mesh, u: np.ndarray, job, run) -> None:
             vol["cauchy_stress_kPa"][c].reshape(3, 3), 0.5 * (sigma + sigma.T), rtol=1e-4, atol=1e-4
         )
         np.testing.assert_allclose(
-            vol["principal_stress_kPa"][c], np.sort(np.linalg.eigvalsh(sigma))[::-1], rtol=1e-4, atol=1e-4
+            vol["principal_stress_kPa"][c],
+            np.sort(np.linalg.eigvalsh(sigma))[::-1],
+            rtol=1e-4,
+            atol=1e-4,
         )
 
 

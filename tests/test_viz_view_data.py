@@ -63,7 +63,9 @@ def _solver_file(run: Path, job_index: int, path: Path, lines: int = 3) -> dict[
     return profiles
 
 
-def test_view_reads_solve_output_and_plots_every_stored_line(run: Path, tmp_path: Path, capsys) -> None:
+def test_view_reads_solve_output_and_plots_every_stored_line(
+    run: Path, tmp_path: Path, capsys
+) -> None:
     # Job 3 has no stored result; `solve RUN --job 3` would write RUN/solve/job_3.h5.
     assert main(["view", str(run), "--job", "3", "--out", str(tmp_path / "a.html")]) == 2
     assert "no stored result" in capsys.readouterr().err
@@ -124,7 +126,9 @@ def test_cut_lies_in_the_mid_plane_and_covers_the_section(run: Path, tmp_path: P
     for s in data["stages"]:
         vm = von_mises(mesh.points, mesh.cells, s["stage"], 0)
         got = _arr(s["cut_vm"], "<f4")
-        assert len(got) == len(tri) and set(np.round(got, 3)) <= set(np.round(vm.astype(np.float32), 3))
+        assert len(got) == len(tri) and set(np.round(got, 3)) <= set(
+            np.round(vm.astype(np.float32), 3)
+        )
     assert data["element"].startswith("P1")
 
 

@@ -25,7 +25,9 @@ def render_surface(vtm: Path, png: Path, size: tuple[int, int] = (1100, 750)) ->
     reader.SetFileName(str(vtm))
     reader.Update()
     mb = reader.GetOutput()
-    names = [mb.GetMetaData(i).Get(vtk.vtkCompositeDataSet.NAME()) for i in range(mb.GetNumberOfBlocks())]
+    names = [
+        mb.GetMetaData(i).Get(vtk.vtkCompositeDataSet.NAME()) for i in range(mb.GetNumberOfBlocks())
+    ]
     grid = mb.GetBlock(names.index("surface"))
     vm = vtk_to_numpy(grid.GetCellData().GetArray("von_mises_kPa"))
     warp = vtk.vtkWarpVector()

@@ -37,11 +37,10 @@ def cmd(run_dir: Path, out: Path | None, views: str) -> None:
     sizes are printed at the end.
     """
     from ..config.manifest import load_run
-    from ..store.reader import read_results
-    from ..viz.atlas import build_atlas, parse_views
-
     from ..core.errors import WoundsweepError
     from ..core.fsutil import check_output_dir
+    from ..store.reader import read_results
+    from ..viz.atlas import build_atlas, parse_views
 
     run = load_run(run_dir)
     out = out or run.run_dir / "atlas"

@@ -103,7 +103,12 @@ def plane_slice(points: np.ndarray, cells: np.ndarray, axis: int, value: float) 
         pos = [x for x, s in zip(v, side[c]) if s]
         neg = [x for x, s in zip(v, side[c]) if not s]
         if len(pos) == 2:  # a quadrilateral p0-n0, p0-n1, p1-n1, p1-n0
-            q = [edge(pos[0], neg[0]), edge(pos[0], neg[1]), edge(pos[1], neg[1]), edge(pos[1], neg[0])]
+            q = [
+                edge(pos[0], neg[0]),
+                edge(pos[0], neg[1]),
+                edge(pos[1], neg[1]),
+                edge(pos[1], neg[0]),
+            ]
             tris += [[q[0], q[1], q[2]], [q[0], q[2], q[3]]]
             owner += [int(c), int(c)]
         else:
@@ -112,4 +117,6 @@ def plane_slice(points: np.ndarray, cells: np.ndarray, axis: int, value: float) 
             owner.append(int(c))
     a, b = np.asarray(ea, np.int64), np.asarray(eb, np.int64)
     t = d[a] / (d[a] - d[b]) if len(a) else np.zeros(0)
-    return PlaneSlice(a, b, t, np.asarray(tris, np.int64).reshape(-1, 3), np.asarray(owner, np.int64))
+    return PlaneSlice(
+        a, b, t, np.asarray(tris, np.int64).reshape(-1, 3), np.asarray(owner, np.int64)
+    )

@@ -59,7 +59,9 @@ def write_vtu(
     def write(tmp: str) -> None:
         meshio.write(tmp, mesh, file_format="vtu", binary=True, compression="zlib")
         text = Path(tmp).read_text("ascii")
-        Path(tmp).write_text(text.replace("<UnstructuredGrid>\n", "<UnstructuredGrid>\n" + block, 1))
+        Path(tmp).write_text(
+            text.replace("<UnstructuredGrid>\n", "<UnstructuredGrid>\n" + block, 1)
+        )
 
     atomic_write(path, write)
 

@@ -110,11 +110,15 @@ def cmd(
         if value is not None:
             overrides[key] = value
     schemes = SCHEMES if split == "both" else (split,)
-    bar = tqdm(total=analysis_steps(len(schemes)), desc="analyze", unit="step")
+    # On a terminal only (disable=None): an error stays the one line on stderr.
+    bar = tqdm(total=analysis_steps(len(schemes)), desc="analyze", unit="step", disable=None)
 
     started: list[str] = []
 
     def step(line: str) -> None:  # a step begins: the one before it is done
+        if bar.disable:  # not a terminal (a log file): the step as a line
+            click.echo(line)
+            return
         if started:
             bar.update(1)
         started.append(line)
@@ -125,6 +129,9 @@ def cmd(
             run_dir, overrides, schemes, echo=step, drop_interpenetrating=drop_interpenetrating
         )
         bar.update(bar.total - bar.n)
+    except BaseException:
+        bar.leave = False  # the error line replaces the bar
+        raise
     finally:
         bar.close()
     for line in summary_lines(result.metrics):

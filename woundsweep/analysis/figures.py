@@ -51,8 +51,8 @@ FIGURE_STEMS = {
 
 
 def plain_log(ax: Any, which: str = "xy") -> None:
-    """Log-scaled axes labelled with plain numbers (2, 5, 10, 20, not 2x10^0): ticks at 1-2-5
-    per decade over a short range, fewer over a long one, no minor labels. Call it after
+    """Log-scaled axes labelled with plain numbers (2, 5, 10, 20, not 2x10^0): ticks at 1-2-3-5
+    or 1-2-5 per decade over a short range, fewer over a long one, no minor labels. Call it after
     plotting (the ticks follow the data's range)."""
     from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
 
@@ -63,7 +63,9 @@ def plain_log(ax: Any, which: str = "xy") -> None:
         decades = np.log10(hi / lo) if lo > 0 and hi > lo else 1.0
         if decades <= 0.6:
             subs: tuple[float, ...] = tuple(range(1, 10))
-        elif decades <= 1.6:
+        elif decades <= 1.2:
+            subs = (1.0, 2.0, 3.0, 5.0)
+        elif decades <= 2.0:
             subs = (1.0, 2.0, 5.0)
         elif decades <= 3.2:
             subs = (1.0, 3.0)

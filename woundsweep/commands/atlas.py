@@ -19,7 +19,7 @@ def _mb(n: float) -> str:
 @click.option(
     "--out",
     type=click.Path(file_okay=False, path_type=Path),
-    help="Directory of the site (default RUN_DIR/atlas).",
+    help="Directory of the site (default RUN_DIR/atlas; created if missing).",
 )
 @click.option(
     "--views",
@@ -37,11 +37,17 @@ def cmd(run_dir: Path, out: Path | None, views: str) -> None:
     sizes are printed at the end.
     """
     from ..config.manifest import load_run
+    from ..core.errors import WoundsweepError
+    from ..core.fsutil import check_output_dir
     from ..store.reader import read_results
     from ..viz.atlas import build_atlas, parse_views
 
     run = load_run(run_dir)
     out = out or run.run_dir / "atlas"
+    try:
+        check_output_dir(out)
+    except ValueError as err:
+        raise WoundsweepError(f"--out {err}") from None
     chosen = parse_views(views, [int(j) for j in run.manifest["job_index"]])
     n_files = len(list((run.run_dir / "results").glob("job-*.parquet")))
     click.echo(f"reading and validating {n_files} result files ...", err=True)

@@ -114,12 +114,19 @@ def _index_table(manifest: pd.DataFrame, results: pd.DataFrame, views: set[int])
         index="job_index", columns="stage", values="p99_von_mises_kPa", aggfunc="first"
     )
     jobs = results.drop_duplicates("job_index").set_index("job_index")
-    converged = (results["status"] == StageStatus.CONVERGED).groupby(results["job_index"]).sum()
+    ok = results["status"] == StageStatus.CONVERGED
+    converged = ok.groupby(results["job_index"]).sum()
+    # Converged stages whose sutured zone has reopened (docs/model.md, "Closure measures").
+    closed = results["closed"] if "closed" in results else pd.Series(np.nan, index=results.index)
+    reopened = (
+        (ok & (pd.to_numeric(closed, errors="coerce") == 0)).groupby(results["job_index"]).sum()
+    )
     # The job, its outcome and the p99 per stage first, so that they fit 1,280 px; then the
     # parameters (the job column stays in view when the table scrolls sideways).
     cols = [("job_index", "job", "num"), ("failure_class", "failure_class", "str")]
     cols += [(f"p99_s{k}", f"p99 kPa s{k}", "num") for k in STAGES]
     cols += [("failed_stage", "failed_stage", "num"), ("converged_stages", "converged", "num")]
+    cols += [("reopened_stages", "reopened", "num")]
     cols += [
         (c, c, "num" if pd.api.types.is_numeric_dtype(manifest[c]) else "str")
         for c in _INDEX_PARAMS
@@ -134,6 +141,7 @@ def _index_table(manifest: pd.DataFrame, results: pd.DataFrame, views: set[int])
             row.append(_cell(p99.at[j, k]) if j in p99.index and k in p99.columns else None)
         row.append(_cell(jobs.at[j, "failed_stage"]) if stored else None)
         row.append(int(converged.at[j]) if stored else None)
+        row.append(int(reopened.at[j]) if stored else None)
         row += [_cell(getattr(job, c)) for c in _INDEX_PARAMS]
         row.append("yes" if j in views else "")
         rows.append(row)

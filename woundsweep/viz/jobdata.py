@@ -21,7 +21,13 @@ from ..config.manifest import JobRow, Run
 from ..config.paper import Materials
 from ..core.errors import StoreError
 from ..core.schema import PROFILE_LINES, FailureClass, StageStatus
-from ..store.solverfile import MESH_GROUP, PROFILE_DATASETS, STAGE_DATASETS, stage_group
+from ..store.solverfile import (
+    CLOSURE_LINE_DATASETS,
+    MESH_GROUP,
+    PROFILE_DATASETS,
+    STAGE_DATASETS,
+    stage_group,
+)
 from .surface import closure_zone_facets
 
 __all__ = [
@@ -60,6 +66,8 @@ class JobFields(NamedTuple):
     notes: list[StageNote]
     materials: Materials | None = None  # the run's materials (the derived stresses need them)
     profiles: dict[int, dict[str, np.ndarray]] = {}  # stage -> line name -> (points, 3) + values
+    # stage -> `CLOSURE_LINE_DATASETS` name -> (k,): the line loads along the wound
+    closure_lines: dict[int, dict[str, np.ndarray]] = {}
     source: str = ""  # the file the fields came from
     element_degree: int = 0  # the run's element (1: P1, 2: P2; 0 unknown)
 
@@ -200,7 +208,7 @@ def _assemble(
         if MESH_GROUP not in groups and cache is not None:
             cache.clear()  # jobs come grouped by geometry: one mesh at a time
             cache[key] = (points, cells, cell_tags, facets, facet_tags, in_zone)
-    fields, profiles = {}, {}
+    fields, profiles, closure_lines = {}, {}, {}
     for k in stored:
         g = groups.get(stage_group(k), {})
         if not set(STAGE_DATASETS) <= set(g):
@@ -211,6 +219,8 @@ def _assemble(
         fields[k] = (u, vm)
         if set(PROFILE_DATASETS) <= set(g):
             profiles[k] = _profiles(*(np.asarray(g[name]) for name in PROFILE_DATASETS))
+        if set(CLOSURE_LINE_DATASETS) <= set(g):
+            closure_lines[k] = {name: np.asarray(g[name], float) for name in CLOSURE_LINE_DATASETS}
     return JobFields(
         job=job,
         rows=rows,
@@ -225,6 +235,7 @@ def _assemble(
         materials=run.sweep.materials,
         element_degree=int(run.sweep.solver.element_degree),
         profiles=profiles,
+        closure_lines=closure_lines,
         source=source,
     )
 

@@ -39,6 +39,14 @@ def _num(v: Any) -> float | None:
     return f if math.isfinite(f) else None
 
 
+def _closure_lines(jf: JobFields, k: int) -> dict[str, Any] | None:
+    """A stage's line loads along the wound (mN/mm at y, mm), or None where not stored."""
+    lines = jf.closure_lines.get(k)
+    if not lines:
+        return None
+    return {name: [_num(v) for v in values] for name, values in lines.items()}
+
+
 def _profile_lines(jf: JobFields, k: int) -> list[dict[str, Any]]:
     """A stage's stored profile lines: name, running length from the first point (mm), von
     Mises (kPa, null where a point is outside the mesh)."""
@@ -90,6 +98,7 @@ def view_data(jf: JobFields) -> dict[str, Any]:
                 cut_u=_b64(np.asarray(u)[cut_nodes], "<f4"),
                 cut_vm=_b64(np.asarray(vm, np.float64)[cut.owner], "<f4"),
                 lines=_profile_lines(jf, k),
+                closure=_closure_lines(jf, k),
                 surface_max_kPa=float(np.nanmax(tri_vm)),
                 max={
                     "value_kPa": float(vm[cell]),
@@ -174,15 +183,19 @@ def job_body(
             '<label><input type="checkbox" id="fullrange"> colour scale to the maximum</label>'
             '<label><input type="checkbox" id="seethrough"> see-through surface</label>'
             '<span id="note"></span></div>\n'
-            '<div class="views"><div id="plot"></div><div id="lines"></div></div>\n'
+            '<div class="views"><div id="plot"></div>'
+            '<div class="side"><div id="lines"></div><div id="closure"></div></div></div>\n'
             '<p class="legend">Left: the deformed exterior surface (displacement times the '
             "deformation scale), each triangle coloured by the von Mises stress of the "
             "tetrahedron it bounds; the colour scale ends at the stage's p99 and cells above "
             "it are magenta (the colour bar's top band); the cut shows the half y &ge; the "
             "wound's mid-section and the cut face; black outline: the closure zone; red "
             "diamond: the cell of the largest von Mises (deformed midpoint). Right: von Mises "
-            "along the stored profile lines (reference configuration). Lengths in mm, "
-            "stresses in kPa.</p>\n" + json_script("wsdata", view_data(jf))
+            "along the stored profile lines (reference configuration); below it the closing "
+            "force per unit length along the wound (the load that holds the sutured zone shut: "
+            "where the sutures work hardest) and the flanks' contact force per unit length. "
+            "Lengths in mm, stresses in kPa, line loads in mN/mm.</p>\n"
+            + json_script("wsdata", view_data(jf))
         )
     else:
         view = f'<p class="noview">{escape(view_note)}</p>\n'

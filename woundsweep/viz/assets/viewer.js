@@ -170,6 +170,28 @@
                        line: { color: "#999", dash: "dot", width: 1 } }] : []
     };
     Plotly.react("lines", traces, layout, { responsive: true, displayModeBar: false });
+    drawClosure(s);
+  }
+
+  function drawClosure(s) {
+    var c = s.closure;
+    var traces = c ? [
+      { type: "scatter", mode: "lines+markers", name: "closing force", x: c.closure_line_y_mm,
+        y: c.closing_force_per_length_mN_per_mm, line: { shape: "hvh" },
+        hovertemplate: "closing: %{y:.4g} mN/mm at y = %{x:.3g} mm<extra></extra>" },
+      { type: "scatter", mode: "lines+markers", name: "contact force", x: c.closure_line_y_mm,
+        y: c.contact_force_per_length_mN_per_mm, line: { shape: "hvh" },
+        hovertemplate: "contact: %{y:.4g} mN/mm at y = %{x:.3g} mm<extra></extra>" }
+    ] : [];
+    var layout = {
+      margin: { l: 55, r: 10, t: 30, b: 45 },
+      title: { text: c ? "forces per length along the wound" : "no line loads stored",
+               font: { size: 14 } },
+      xaxis: { title: { text: "y along the wound (mm)" } },
+      yaxis: { title: { text: "mN/mm" }, rangemode: "tozero" },
+      legend: { orientation: "h", y: -0.25 }
+    };
+    Plotly.react("closure", traces, layout, { responsive: true, displayModeBar: false });
   }
 
   if (last < 0) {

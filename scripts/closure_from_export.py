@@ -2,8 +2,9 @@
 
     python scripts/closure_from_export.py EXPORT_DIR [--median 0.01] [--max 0.05]
 
-EXPORT_DIR is what `woundsweep export --all --out EXPORT_DIR` wrote. For each VTU (one job,
-one stage) the closure zone's triangles (cell data ``closure_zone``) give the zone's vertices;
+EXPORT_DIR is what `woundsweep export --all --out EXPORT_DIR` wrote. For each stage's surface
+block (``job-N_stageK_surface.vtu``, read with VTK) the closure zone's triangles (cell data
+``closure_zone``) give the zone's vertices;
 those on the skin surface (largest z) are split at the wound's mid-plane and paired with their
 mirror images; the gap of a pair is the deformed x of the right vertex minus the left one's.
 The zone is closed when the median gap is at most ``--median`` and the largest at most
@@ -22,21 +23,31 @@ import sys
 from collections import defaultdict
 from pathlib import Path
 
-import meshio
 import numpy as np
 from scipy.spatial import cKDTree
 
 
+def _read(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Points, displacement, triangles and their closure-zone flags of a surface block."""
+    import vtk
+    from vtk.util.numpy_support import vtk_to_numpy
+
+    reader = vtk.vtkXMLUnstructuredGridReader()
+    reader.SetFileName(str(path))
+    reader.Update()
+    grid = reader.GetOutput()
+    X = vtk_to_numpy(grid.GetPoints().GetData()).astype(float)
+    u = vtk_to_numpy(grid.GetPointData().GetArray("displacement_mm")).astype(float)
+    tri = vtk_to_numpy(grid.GetCells().GetConnectivityArray()).reshape(-1, 3)
+    zone = vtk_to_numpy(grid.GetCellData().GetArray("closure_zone"))
+    return X, u, tri, zone
+
+
 def closure(path: Path) -> tuple[float, float, float] | None:
-    """(median gap / w, max gap / w, largest overlap / w) of one VTU, None without a zone."""
-    m = meshio.read(path)
-    X = m.points
-    u = m.point_data["displacement_mm"]
-    zone_nodes = []
-    for block, flags in zip(m.cells, m.cell_data["closure_zone"]):
-        if block.type == "triangle":
-            zone_nodes.append(block.data[np.asarray(flags) > 0].ravel())
-    nodes = np.unique(np.concatenate(zone_nodes)) if zone_nodes else np.zeros(0, dtype=int)
+    """(median gap / w, max gap / w, largest overlap / w) of one surface block, None without a
+    zone."""
+    X, u, tri, zone = _read(path)
+    nodes = np.unique(tri[np.asarray(zone) > 0])
     if len(nodes) == 0:
         return None
     hi = X.max(axis=0)
@@ -65,8 +76,8 @@ def main(argv: list[str] | None = None) -> int:
     counts: dict[int, list[int]] = defaultdict(lambda: [0, 0])
     worst: dict[int, float] = defaultdict(float)
     overlap: dict[int, float] = defaultdict(float)
-    for vtu in sorted(args.export_dir.glob("job-*/*.vtu")):
-        m = re.search(r"stage[_-]?(\d)", vtu.name)
+    for vtu in sorted(args.export_dir.glob("job-*/*_surface.vtu")):
+        m = re.search(r"stage(\d)_surface", vtu.name)
         if not m:
             continue
         res = closure(vtu)

@@ -89,3 +89,13 @@ def cylinder_mesh():
     from woundsweep.mesh.build import build_mesh
 
     return build_mesh(GeometrySpec.cylindrical(1.0, 1.0, 4.0, 1.2, 0.0, 0.3))
+
+
+@pytest.fixture(scope="module")
+def deep_wedge_mesh():
+    """Demo job 18: a deep, narrow wedge (width 1.2, depth 1.0, m = 0.3) whose lower flanks
+    overlap under the Dirichlet closure, so the contact stages engage."""
+    from woundsweep.config.geometry import GeometrySpec
+    from woundsweep.mesh.build import build_mesh
+
+    return build_mesh(GeometrySpec.wedge(1.0, 1.0, 4.0, 1.2, 1.0, 0.3))

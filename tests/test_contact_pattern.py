@@ -2,7 +2,7 @@
 
 Without DOLFINx: the vectorised neighbour search against brute force, the planned pattern
 against the tangents of states near the plan, and its growth past the plan. With DOLFINx, on
-a contact stage of a small real model (the demo cylinder at 45 degrees, tie active): every
+a contact stage of a small real model (the demo's deep wedge at 45 degrees, tie active): every
 entry of the contact and tie tangents lies in the preallocated pattern, the stage's Newton
 steps cause no PETSc malloc and keep the matrix's nonzero state (so MUMPS keeps its
 analysis), and the assembled Jacobian is the one of plain insertion into the form's matrix.
@@ -124,12 +124,12 @@ class _Step:
 
 
 @pytest.fixture(scope="module")
-def stage4(cylinder_mesh) -> dict[str, Any]:
-    """Stages 1-4 of the demo cylinder at 45 degrees, every stage-4 Jacobian recorded."""
+def stage4(deep_wedge_mesh) -> dict[str, Any]:
+    """Stages 1-4 of the demo's deep wedge at 45 degrees, every stage-4 Jacobian recorded."""
     from woundsweep.physics.materials import JobMaterials
     from woundsweep.physics.stages import WoundModel
 
-    m = WoundModel(cylinder_mesh)
+    m = WoundModel(deep_wedge_mesh)
     m.set_materials(JobMaterials.table2("stiff", 45.0))
     for k in (1, 2, 3):
         m.run_stage(k)

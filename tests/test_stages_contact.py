@@ -20,15 +20,6 @@ pytestmark = pytest.mark.fem
 CONVERGED = "converged"
 
 
-@pytest.fixture(scope="module")
-def wedge_mesh():
-    from woundsweep.config.geometry import GeometrySpec
-    from woundsweep.mesh.build import build_mesh
-
-    # Demo job 18: a deep, narrow wedge (width 1.2, depth 1.0).
-    return build_mesh(GeometrySpec.wedge(1.0, 1.0, 4.0, 1.2, 1.0, 0.3))
-
-
 def _flank_nodes(m) -> tuple[np.ndarray, np.ndarray]:
     left, right = m.contact.surfaces
     return left.nodes, right.nodes
@@ -57,8 +48,10 @@ def _run(mesh, angle: float, skin: str = "stiff"):
 
 
 @pytest.mark.parametrize("which", ["cylinder", "wedge"])
-def test_contact_stages_close_the_wound_without_overlap(which, cylinder_mesh, wedge_mesh) -> None:
-    mesh = cylinder_mesh if which == "cylinder" else wedge_mesh
+def test_contact_stages_close_the_wound_without_overlap(
+    which, cylinder_mesh, deep_wedge_mesh
+) -> None:
+    mesh = cylinder_mesh if which == "cylinder" else deep_wedge_mesh
     m, outs = _run(mesh, 0.0)
     assert [o.solve.status for o in outs] == [CONVERGED] * 6
     d4, d5, d6 = (o.diagnostics for o in outs[3:])
@@ -95,9 +88,9 @@ def test_contact_stages_close_the_wound_without_overlap(which, cylinder_mesh, we
     assert d6["contact_force_mN"] == pytest.approx(d4["contact_force_mN"], rel=0.02)
 
 
-def test_contact_at_45_degrees(wedge_mesh) -> None:
+def test_contact_at_45_degrees(deep_wedge_mesh) -> None:
     """Oblique fibres: the flanks are no mirror images, contact must still hold them apart."""
-    m, outs = _run(wedge_mesh, 45.0, skin="stiff")
+    m, outs = _run(deep_wedge_mesh, 45.0, skin="stiff")
     assert [o.solve.status for o in outs] == [CONVERGED] * 6
     d6 = outs[5].diagnostics
     assert d6["max_penetration_rel"] < 0.01
@@ -124,10 +117,10 @@ def test_the_zone_tie_carries_nothing_where_the_closure_load_holds(cylinder_mesh
     assert float(np.abs(m.u - m.displacements[2]).max()) < 1e-6 * scale
 
 
-def test_the_zone_tie_holds_the_flanks_at_45_degrees(wedge_mesh) -> None:
+def test_the_zone_tie_holds_the_flanks_at_45_degrees(deep_wedge_mesh) -> None:
     """At 45 degrees the tie carries force, its slip stays at the penalty's scale, and the
     stage's potential (tie included) is that of its residual."""
-    m, outs = _run(wedge_mesh, 45.0)
+    m, outs = _run(deep_wedge_mesh, 45.0)
     assert [o.solve.status for o in outs] == [CONVERGED] * 6
     d6 = outs[5].diagnostics
     assert d6["tie_force_mN"] > 1e-3 * d6["contact_force_mN"]
@@ -148,7 +141,7 @@ def test_the_zone_tie_holds_the_flanks_at_45_degrees(wedge_mesh) -> None:
     assert fd == pytest.approx(float(R @ v), rel=1e-4)
 
 
-def test_unconverged_stage_3_does_not_stop_stages_4_to_6(wedge_mesh) -> None:
+def test_unconverged_stage_3_does_not_stop_stages_4_to_6(deep_wedge_mesh) -> None:
     """Stage 4 restarts from stage 2 under the closure load: with stage 3 starved (half its
     load and one Newton step), stages 4-6 run and give the results of a run whose stage 3
     converged."""
@@ -158,8 +151,8 @@ def test_unconverged_stage_3_does_not_stop_stages_4_to_6(wedge_mesh) -> None:
     from woundsweep.solver.newton import MAX_ITERATIONS, NewtonSolver
 
     mats = JobMaterials.table2("stiff", 0.0)
-    full = run_stages(WoundModel(wedge_mesh), mats, 6)
-    m = WoundModel(wedge_mesh)
+    full = run_stages(WoundModel(deep_wedge_mesh), mats, 6)
+    m = WoundModel(deep_wedge_mesh)
     real_run_stage, normal = m.run_stage, m.newton
 
     def starved(stage: int):
@@ -184,13 +177,13 @@ def test_unconverged_stage_3_does_not_stop_stages_4_to_6(wedge_mesh) -> None:
         assert b.result.contact_force_mN == pytest.approx(a.result.contact_force_mN, rel=1e-6)
 
 
-def test_unconverged_contact_stage_is_recorded_as_such(wedge_mesh) -> None:
+def test_unconverged_contact_stage_is_recorded_as_such(deep_wedge_mesh) -> None:
     from woundsweep.physics.job import run_stages
     from woundsweep.physics.materials import JobMaterials
     from woundsweep.physics.stages import CONTACT_START_kPa, WoundModel
     from woundsweep.solver.newton import MAX_ITERATIONS, NewtonSolver
 
-    m = WoundModel(wedge_mesh)
+    m = WoundModel(deep_wedge_mesh)
     real_run_stage = m.run_stage
 
     def starved(stage: int):
@@ -230,14 +223,14 @@ def test_unconverged_contact_stage_is_recorded_as_such(wedge_mesh) -> None:
     assert nearest > 0.0  # the closed 0-degree wedge is stable at the starting penalty
 
 
-def test_contact_stage_potential_is_that_of_the_residual(wedge_mesh) -> None:
+def test_contact_stage_potential_is_that_of_the_residual(deep_wedge_mesh) -> None:
     """Every load is dead (the closure load is the stage-2 reactions, fixed), so each stage has
     a potential: its directional derivative is R . v (central differences), in stage 3 and in
     a contact stage with the contact and the tie engaged, away from equilibrium."""
     from woundsweep.physics.materials import JobMaterials
     from woundsweep.physics.stages import WoundModel
 
-    m = WoundModel(wedge_mesh)
+    m = WoundModel(deep_wedge_mesh)
     m.set_materials(JobMaterials.table2("stiff", 45.0))
     for k in (1, 2, 3):
         assert m.run_stage(k).solve.status == CONVERGED
@@ -259,7 +252,7 @@ def test_contact_stage_potential_is_that_of_the_residual(wedge_mesh) -> None:
         assert fd == pytest.approx(float(R @ v), rel=1e-5)
 
 
-def test_contact_stages_5_and_6_start_in_equilibrium(wedge_mesh) -> None:
+def test_contact_stages_5_and_6_start_in_equilibrium(deep_wedge_mesh) -> None:
     """At s = 0, stages 5 and 6 solve exactly the converged state of the stage before: the
     out-of-balance force that the stage releases holds only its convergence residual. (It
     once was computed with contact off, so it held the contact forces as well: a jump of
@@ -267,7 +260,7 @@ def test_contact_stages_5_and_6_start_in_equilibrium(wedge_mesh) -> None:
     from woundsweep.physics.materials import JobMaterials
     from woundsweep.physics.stages import WoundModel
 
-    m = WoundModel(wedge_mesh)
+    m = WoundModel(deep_wedge_mesh)
     m.set_materials(JobMaterials.table2("stiff", 0.0))
     for k in range(1, 5):
         assert m.run_stage(k).solve.status == CONVERGED

@@ -3,6 +3,7 @@ file's keys, and one job through the six stages."""
 
 from __future__ import annotations
 
+import json
 import math
 from pathlib import Path
 
@@ -148,10 +149,12 @@ def test_mesh_is_mirror_symmetric(meshes) -> None:
     x_c = SIZES[3] / 2
     mirror_x = p * [-1, 1, 1] + [2 * x_c, 0, 0]
     mirror_y = p * [1, -1, 1]
-    np.testing.assert_array_equal(_canonical(mirror_x), _canonical(p))
+    # 2 x_c - x is exact up to one rounding of the sum.
+    np.testing.assert_allclose(_canonical(mirror_x), _canonical(p), rtol=0, atol=1e-12)
     np.testing.assert_array_equal(_canonical(mirror_y), _canonical(p))
     zone = p[np.unique(mesh.facets[mesh.facet_tags == WOUND_ZONE])]
-    np.testing.assert_array_equal(_canonical(zone * [-1, 1, 1] + [2 * x_c, 0, 0]), _canonical(zone))
+    image = _canonical(zone * [-1, 1, 1] + [2 * x_c, 0, 0])
+    np.testing.assert_allclose(image, _canonical(zone), rtol=0, atol=1e-12)
     for a, b in ((X_MIN, X_MAX), (Y_MIN, Y_MAX)):
         assert np.sum(mesh.facet_tags == a) == np.sum(mesh.facet_tags == b)
 
@@ -251,11 +254,15 @@ def test_fusiform_job_closes_through_six_stages(tmp_path: Path) -> None:
     later = rows[rows["stage"] >= 2]
     assert (later["closed"] == 1).all()
     assert (later["closure_gap_max_per_w"] <= 0.05).all()
-    # The stage-2 closure holds the flanks against the pre-tension: a pull toward the
-    # mid-plane on both flanks, equal in size at 0 and 90 degrees (mirror-symmetric material).
+    # The stage-2 closure pulls both flanks toward the mid-plane (opposite x-forces), equal in
+    # size at 0 and 90 degrees, where the material is mirror-symmetric about x = x_c.
     s2 = rows[rows["stage"] == 2].set_index("orientation_deg")
-    assert (s2["closure_force_left_mN"] > 0).all()
+    extra = s2["stage_extra_json"].map(json.loads)
+    left = extra.map(lambda e: e["closure_force_left_mN"])
+    right = extra.map(lambda e: e["closure_force_right_mN"])
+    assert (left > 0).all()
     for t in (0.0, 90.0):
-        assert s2.loc[t, "closure_force_right_mN"] == pytest.approx(
-            s2.loc[t, "closure_force_left_mN"], rel=1e-3
-        )
+        assert -right[t] == pytest.approx(left[t], rel=1e-6)
+    # Clinically, a wound along the Langer line (orientation 90) closes with less force than
+    # one across it (orientation 0).
+    assert left[90.0] < left[45.0] < left[0.0]

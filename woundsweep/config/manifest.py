@@ -103,7 +103,7 @@ def _check_geometries(sweep: Sweep, df: pd.DataFrame) -> None:
     """Every geometry must be buildable (`GeometrySpec`), so no job fails on its ranges later."""
     for row in df.drop_duplicates(list(GEOMETRY_KEYS)).to_dict("records"):
         try:
-            GeometrySpec.from_row(row)
+            GeometrySpec.from_row(row, sweep.stages.closure_zone, sweep.solver.element_degree)
         except GeometryError as err:
             where = ", ".join(
                 f"{k}={row[k]:g}" if isinstance(row[k], float) else f"{k}={row[k]}"

@@ -31,6 +31,7 @@ from woundsweep.core.schema import (
     Y_MIN,
 )
 from woundsweep.mesh.build import build_mesh, signed_volumes
+from woundsweep.physics.profiles import profile_lines, wound_edge_x
 
 DEMO = ROOT / "sweeps" / "fusiform-demo.yaml"
 # t_d, t_s, L, w, l, d: a 3:1 excision 2.1 mm deep through a 1.5 mm dermis.
@@ -174,6 +175,16 @@ def test_zone_is_the_walls_upper_part_over_its_length(y_fraction: float) -> None
     area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
     exact = 4 * g.radius * math.asin(y_max / g.radius) * -z_min
     assert -0.002 < area.sum() / exact - 1 < 0
+
+
+def test_profile_lines_start_at_the_excisions_edge(meshes) -> None:
+    mesh = meshes[0.3]
+    edge = wound_edge_x(mesh.points, mesh.facets, mesh.facet_tags)
+    assert edge == 0.0  # x_c - w/2: the bounding-box rule would put it at l/2
+    lines = profile_lines(mesh.points, edge)
+    assert np.all(lines[0][:, 0] == edge) and np.all(lines[1][:, 0] == edge)
+    wedge = build_mesh(GeometrySpec.wedge(1, 1, 4, 1.2, 0.6, 0.3))
+    assert wound_edge_x(wedge.points, wedge.facets, wedge.facet_tags) is None  # the bbox rule
 
 
 def test_cells_grow_with_the_mesh_size_factor(meshes) -> None:

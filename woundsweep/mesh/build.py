@@ -5,7 +5,8 @@ fragment, and the closure zone's border lines are imprinted on the wound face, s
 union of whole facets, tagged WOUND_ZONE) under the size law of `woundsweep.mesh.sizing`, and the quarter is mirrored about
 x = w/2 and y = 0 in numpy. The mesh is therefore exactly mirror-symmetric, which the closure
 boundary condition at x = w/2 relies on, and it costs a quarter of a full build. Cell and
-facet tags are those of `woundsweep.core.schema`.
+facet tags are those of `woundsweep.core.schema`. The fusiform excision's quarter is built by
+`woundsweep.mesh.fusiform`; its patch extends L beyond the wound along y too.
 """
 
 from __future__ import annotations

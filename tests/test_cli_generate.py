@@ -107,7 +107,7 @@ BAD = {
         "grid.skin_type",
     ),
     "rule-unknown-name": (
-        lambda p: _mutate(p, lambda d: d.update(exclude=["wound_length_mm > 1"])),
+        lambda p: _mutate(p, lambda d: d.update(exclude=["wound_volume_mm3 > 1"])),
         "exclude[0]",
     ),
     "zero-jobs": (

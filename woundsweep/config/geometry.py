@@ -7,10 +7,14 @@ x = w/2:
 
 - cylindrical: a cylinder along y with its axis at (x = w/2, z = a w) and radius
   R = sqrt((w/2)^2 + (a w)^2), so the opening at the surface is w and the depth is R - a w;
-- wedge: an isosceles triangular prism, width w at the surface, apex at z = -d.
+- wedge: an isosceles triangular prism, width w at the surface, apex at z = -d;
+- fusiform: the elliptical excision (`woundsweep.config.fusiform`): a lens of length l along y
+  and width w, depth d, centred on (w/2, 0) in a patch that extends L beyond it on every side
+  (x in [-L, L + w], y in [-(L + l/2), L + l/2]).
 
 The closure zone (where primary intention acts, the sweep's ``stages.closure_zone``) is part
-of the geometry: the wound surface within |y| <= zone_y_fraction * L and
+of the geometry: the wound surface within |y| <= zone_y_fraction * (the wound's half-length:
+L for the trenches, l/2 for the excision) and
 z >= -zone_depth_fraction * d is meshed as its own faces (`woundsweep.mesh.build`).
 """
 
@@ -22,12 +26,13 @@ from dataclasses import asdict, dataclass
 from typing import Any
 
 from ..core.errors import GeometryError
+from .fusiform import FLOOR_RISE, Lens, lens
 from .paper import ClosureZone
 from .solver import DEGREES, SolverSettings
 
 __all__ = ["FINEST_FACTOR", "SHAPES", "GeometrySpec", "wound_distance_mm"]
 
-SHAPES = ("cylindrical", "wedge")
+SHAPES = ("cylindrical", "wedge", "fusiform")
 # The finest mesh size factor a mesh can have. A sweep's grid takes factors in (0, 1];
 # `woundsweep converge` refines up to this one, to extrapolate past the grid's finest.
 FINEST_FACTOR = 2.0
@@ -44,6 +49,7 @@ class GeometrySpec:
     (|y| <= zone_y_fraction * L, z >= -zone_depth_fraction * d). ``element_degree`` is the
     displacement element's (`woundsweep.config.solver.DEGREES`): the size law sets the node
     spacing, and an element's edges span ``element_degree`` spacings (`mesh.sizing`).
+    ``wound_length_mm`` is the excision's length l (fusiform only, None for the trenches).
     """
 
     shape: str
@@ -57,6 +63,7 @@ class GeometrySpec:
     zone_y_fraction: float = ClosureZone.y_fraction
     zone_depth_fraction: float = ClosureZone.depth_fraction
     element_degree: int = SolverSettings.element_degree
+    wound_length_mm: float | None = None
 
     def __post_init__(self) -> None:
         _validate(self)
@@ -108,6 +115,33 @@ class GeometrySpec:
         )
 
     @classmethod
+    def fusiform(
+        cls,
+        dermal_thickness_mm: float,
+        subcutis_thickness_mm: float,
+        patch_half_length_mm: float,
+        wound_width_mm: float,
+        wound_length_mm: float,
+        wound_depth_mm: float,
+        mesh_size_factor: float,
+        **settings: Any,
+    ) -> GeometrySpec:
+        """A fusiform excision of the given width, length and depth; ``settings``: the zone
+        fractions and the element degree."""
+        return cls(
+            "fusiform",
+            dermal_thickness_mm,
+            subcutis_thickness_mm,
+            patch_half_length_mm,
+            wound_width_mm,
+            wound_depth_mm,
+            None,
+            mesh_size_factor,
+            wound_length_mm=wound_length_mm,
+            **settings,
+        )
+
+    @classmethod
     def from_row(
         cls,
         row: Mapping[str, Any] | Any,
@@ -123,11 +157,14 @@ class GeometrySpec:
         """
         get = row.get
         shape = get("wound_shape", get("shape"))
-        aspect = get("wound_aspect_factor")
+        aspect, length = get("wound_aspect_factor"), get("wound_length_mm")
         try:
             aspect = None if aspect is None or math.isnan(float(aspect)) else float(aspect)
-            if shape == "wedge":
-                aspect = None  # the manifest leaves the other shape's factor NaN
+            length = None if length is None or math.isnan(float(length)) else float(length)
+            if shape != "cylindrical":
+                aspect = None  # the manifest leaves the other shapes' factors NaN
+            if shape != "fusiform":
+                length = None
             return cls(
                 str(shape),
                 _num(get("dermal_thickness_mm")),
@@ -140,6 +177,7 @@ class GeometrySpec:
                 float(ClosureZone.y_fraction if zone is None else zone.y_fraction),
                 float(ClosureZone.depth_fraction if zone is None else zone.depth_fraction),
                 element_degree,
+                length,
             )
         except (GeometryError, TypeError, ValueError) as err:
             job = get("job_index")
@@ -165,13 +203,42 @@ class GeometrySpec:
             return math.nan
         return self.wound_aspect_factor * self.wound_width_mm
 
+    @property
+    def wound_half_length_mm(self) -> float:
+        """Half the wound's length along y: l/2 for the excision, L for the trenches (which
+        run the whole patch); the closure zone's ``zone_y_fraction`` is a fraction of it."""
+        if self.wound_length_mm is None:
+            return self.patch_half_length_mm
+        return self.wound_length_mm / 2
+
+    @property
+    def patch_half_length_y_mm(self) -> float:
+        """The patch's half-length along y: L beyond the wound's ends (L for the trenches)."""
+        if self.wound_length_mm is None:
+            return self.patch_half_length_mm
+        return self.patch_half_length_mm + self.wound_length_mm / 2
+
+    def lens(self) -> Lens:
+        """The excision's outline and floor (fusiform only)."""
+        if self.wound_length_mm is None:
+            raise GeometryError(f"a {self.shape} wound has no lens outline")
+        w = self.wound_width_mm
+        return lens(self.wound_length_mm, w, self.wound_depth_mm, w / 2)
+
     def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
+        """The parameters; ``wound_length_mm`` only for the excision (so the trenches' cache
+        keys are those of the shapes without it)."""
+        d = asdict(self)
+        if d["wound_length_mm"] is None:
+            del d["wound_length_mm"]
+        return d
 
     def describe(self) -> str:
         """One-line summary for messages."""
         a = self.wound_aspect_factor
         aspect = f" a={a:g}" if a is not None else ""
+        if self.wound_length_mm is not None:
+            aspect = f" l={self.wound_length_mm:g}"
         zone = (self.zone_y_fraction, self.zone_depth_fraction)
         default = (ClosureZone.y_fraction, ClosureZone.depth_fraction)
         zone_text = "" if zone == default else f" zone={zone[0]:.4g},{zone[1]:.4g}"
@@ -230,7 +297,11 @@ def _validate(spec: GeometrySpec) -> None:
                 f"(sqrt((w/2)^2 + (a w)^2) - a w = {expected:g})"
             )
     elif spec.wound_aspect_factor is not None:
-        raise GeometryError("wound_aspect_factor must be None for a wedge wound")
+        raise GeometryError(f"wound_aspect_factor must be None for a {spec.shape} wound")
+    if spec.shape == "fusiform":
+        _validate_fusiform(spec)
+    elif spec.wound_length_mm is not None:
+        raise GeometryError(f"wound_length_mm must be None for a {spec.shape} wound")
     if spec.wound_depth_mm >= T:
         raise GeometryError(
             f"wound_depth_mm={spec.wound_depth_mm:g} reaches the bottom of the patch "
@@ -238,8 +309,23 @@ def _validate(spec: GeometrySpec) -> None:
         )
 
 
+def _validate_fusiform(spec: GeometrySpec) -> None:
+    length, w = spec.wound_length_mm, spec.wound_width_mm
+    if not isinstance(length, (int, float)) or not math.isfinite(length) or length <= w:
+        raise GeometryError(
+            f"wound_length_mm={length!r} must be longer than the width ({w:g} mm) for a fusiform wound"
+        )
+    top = 1 - FLOOR_RISE
+    if spec.zone_depth_fraction >= top:
+        raise GeometryError(
+            f"zone_depth_fraction={spec.zone_depth_fraction:g} must be below {top:g} for a "
+            "fusiform wound (the closure zone ends on the walls, above the floor)"
+        )
+
+
 def wound_distance_mm(spec: GeometrySpec, x: float, z: float) -> float:
-    """Distance from (x, z) to the wound surface (the wound is uniform in y); 0 inside it."""
+    """Distance from (x, z) to a trench's surface (uniform in y); 0 inside it. The
+    excision's distance is `Lens.distance`."""
     xc = spec.wound_width_mm / 2
     if spec.shape == "cylindrical":
         return max(math.hypot(x - xc, z - spec.wound_axis_z_mm) - spec.wound_radius_mm, 0.0)

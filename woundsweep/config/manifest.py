@@ -38,9 +38,9 @@ __all__ = ["JobRow", "Run", "canonical_hash", "count_jobs", "expand", "load_run"
 
 
 class JobRow(TypedDict):
-    """One manifest row (`MANIFEST_COLUMNS`; lengths in mm). The shape's own factor is NaN for
-    the other shape: ``wound_depth_factor`` for a cylinder, ``wound_aspect_factor`` for a
-    wedge."""
+    """One manifest row (`MANIFEST_COLUMNS`; lengths in mm). A shape's own factors are NaN for
+    the other shapes: ``wound_depth_factor`` for a cylinder, ``wound_aspect_factor`` for a
+    wedge or an excision, ``wound_length_factor`` and ``wound_length_mm`` for the trenches."""
 
     job_index: int
     job_id: str
@@ -53,6 +53,7 @@ class JobRow(TypedDict):
     mesh_size_factor: float
     wound_depth_factor: float
     wound_aspect_factor: float
+    wound_length_factor: float
     orientation_deg: float
     skin_type: str
     subcutis_thickness_mm: float
@@ -60,6 +61,7 @@ class JobRow(TypedDict):
     patch_half_length_mm: float
     wound_width_mm: float
     wound_depth_mm: float
+    wound_length_mm: float
 
 
 def canonical_hash(params: dict[str, Any]) -> str:
@@ -85,20 +87,23 @@ def _derive(df: pd.DataFrame) -> pd.DataFrame:
     cyl_depth = np.sqrt((w / 2) ** 2 + (a * w) ** 2) - a * w
     wedge_depth = df["wound_depth_factor"] * df["total_thickness_mm"]
     df["wound_depth_mm"] = np.where(df["wound_shape"] == "cylindrical", cyl_depth, wedge_depth)
+    df["wound_length_mm"] = df["wound_length_factor"] * w  # the excision's l; NaN otherwise
     return df
 
 
 def count_jobs(sweep: Sweep) -> int:
     """The jobs of the grid before exclusions (computed without expanding it)."""
     common = math.prod(len(sweep.grid[k]) for k in GRID_AXES)
-    return sum(common * len(sweep.shapes[s][SHAPE_AXES[s]]) for s in sweep.shapes)
+    return sum(
+        common * math.prod(len(sweep.shapes[s][a]) for a in SHAPE_AXES[s]) for s in sweep.shapes
+    )
 
 
 def _check_geometries(sweep: Sweep, df: pd.DataFrame) -> None:
     """Every geometry must be buildable (`GeometrySpec`), so no job fails on its ranges later."""
     for row in df.drop_duplicates(list(GEOMETRY_KEYS)).to_dict("records"):
         try:
-            GeometrySpec.from_row(row)
+            GeometrySpec.from_row(row, sweep.stages.closure_zone, sweep.solver.element_degree)
         except GeometryError as err:
             where = ", ".join(
                 f"{k}={row[k]:g}" if isinstance(row[k], float) else f"{k}={row[k]}"
@@ -123,16 +128,16 @@ def expand(sweep: Sweep, max_jobs: int = MAX_JOBS) -> pd.DataFrame:
         )
     rows = []
     for shape in sorted(sweep.shapes):
-        axis = SHAPE_AXES[shape]
-        axes = [sweep.grid[k] for k in GRID_AXES[:5]] + [sweep.shapes[shape][axis]]
+        own = SHAPE_AXES[shape]
+        axes = [sweep.grid[k] for k in GRID_AXES[:5]] + [sweep.shapes[shape][a] for a in own]
         axes += [sweep.grid["skin_type"], sweep.grid["orientation_deg"]]
-        names = [*GRID_AXES[:5], axis, "skin_type", "orientation_deg"]
+        names = [*GRID_AXES[:5], *own, "skin_type", "orientation_deg"]
         for values in itertools.product(*axes):
             row = dict(zip(names, values))
             row["wound_shape"] = shape
             rows.append(row)
     df = pd.DataFrame(rows)
-    for axis in SHAPE_AXES.values():
+    for axis in sorted({a for own in SHAPE_AXES.values() for a in own}):
         if axis not in df:
             df[axis] = np.nan
     df = _derive(df)
@@ -183,6 +188,10 @@ class Run(NamedTuple):
         )
 
 
+# Manifest columns of the fusiform excision (NaN for the trenches).
+_LATER_COLUMNS = ("wound_length_factor", "wound_length_mm")
+
+
 def load_run(run_dir: str | Path) -> Run:
     """Open a run directory: its sweep copy and its manifest."""
     rd = Path(run_dir)
@@ -195,6 +204,9 @@ def load_run(run_dir: str | Path) -> Run:
         manifest = pd.read_parquet(manifest_path)
     except Exception as err:  # pyarrow raises several types for damaged files
         raise StoreError(f"{manifest_path}: unreadable manifest ({type(err).__name__})") from None
+    for name in _LATER_COLUMNS:  # absent from manifests made before the excision existed
+        if name not in manifest.columns:
+            manifest[name] = np.nan
     missing = [c for c in MANIFEST_COLUMNS if c not in manifest.columns]
     if missing:
         raise StoreError(f"{manifest_path}: missing columns {missing}")

@@ -1,7 +1,7 @@
 """Sweep files: their schema, loading and validation into a typed `Sweep`.
 
-A sweep YAML has the sections ``grid`` (axes shared by both wound shapes), ``shapes``
-(the shape-specific axis of each wound shape), ``exclude`` (rules, as expressions over the
+A sweep YAML has the sections ``grid`` (axes shared by the wound shapes), ``shapes``
+(the shape-specific axes of each wound shape), ``exclude`` (rules, as expressions over the
 manifest's columns, that drop combinations), and the settings ``materials``, ``stages``,
 ``solver`` and ``analysis`` (typed records whose defaults are the paper's values:
 `Materials`, `StageSettings`, `SolverSettings`, `ModelSettings`).
@@ -59,7 +59,13 @@ GRID_AXES = (
     "skin_type",
     "orientation_deg",
 )
-SHAPE_AXES = {"cylindrical": "wound_aspect_factor", "wedge": "wound_depth_factor"}
+# Each wound shape's own axes: the cylinder's axis offset (a multiple of w), the depth as a
+# fraction of T, the excision's length as a multiple of w.
+SHAPE_AXES = {
+    "cylindrical": ("wound_aspect_factor",),
+    "wedge": ("wound_depth_factor",),
+    "fusiform": ("wound_length_factor", "wound_depth_factor"),
+}
 # Parameters that define the mesh; the 9 jobs (skin type x orientation) of a geometry share it.
 GEOMETRY_KEYS = (
     "wound_shape",
@@ -70,6 +76,7 @@ GEOMETRY_KEYS = (
     "mesh_size_factor",
     "wound_depth_factor",
     "wound_aspect_factor",
+    "wound_length_factor",
 )
 DERIVED = (
     "subcutis_thickness_mm",
@@ -77,6 +84,7 @@ DERIVED = (
     "patch_half_length_mm",
     "wound_width_mm",
     "wound_depth_mm",
+    "wound_length_mm",
 )
 MANIFEST_COLUMNS = (
     "job_index",
@@ -242,11 +250,12 @@ def parse_sweep(data: Any, path: str = "<sweep>") -> Sweep:
                 path, f"shapes.{shape}", f"unknown wound shape (expected one of {list(SHAPE_AXES)})"
             )
         spec = shapes_in[shape]
-        axis = SHAPE_AXES[shape]
-        if not isinstance(spec, dict) or set(spec) != {axis}:
-            raise SweepError(path, f"shapes.{shape}", f"expected exactly the key {axis!r}")
+        axes = SHAPE_AXES[shape]
+        if not isinstance(spec, dict) or set(spec) != set(axes):
+            keys = " and ".join(repr(a) for a in axes)
+            raise SweepError(path, f"shapes.{shape}", f"expected exactly the key(s) {keys}")
         kind = "nonnegative" if shape == "cylindrical" else "positive"
-        shapes[shape] = {axis: _axis(path, f"shapes.{shape}.{axis}", spec[axis], kind=kind)}
+        shapes[shape] = {a: _axis(path, f"shapes.{shape}.{a}", spec[a], kind=kind) for a in axes}
     if max(grid["mesh_size_factor"]) > 1:
         raise SweepError(
             path,
@@ -260,11 +269,19 @@ def parse_sweep(data: Any, path: str = "<sweep>") -> Sweep:
             "expected factors up to 2 (the width is a fraction of the patch half-length and "
             f"must fit the patch), got {max(grid['wound_width_factor'])!r}",
         )
-    if "wedge" in shapes and max(shapes["wedge"]["wound_depth_factor"]) >= 1:
+    for shape in ("wedge", "fusiform"):
+        if shape in shapes and max(shapes[shape]["wound_depth_factor"]) >= 1:
+            raise SweepError(
+                path,
+                f"shapes.{shape}.wound_depth_factor",
+                "expected factors below 1 (the depth is a fraction of the total thickness)",
+            )
+    if "fusiform" in shapes and min(shapes["fusiform"]["wound_length_factor"]) <= 1:
         raise SweepError(
             path,
-            "shapes.wedge.wound_depth_factor",
-            "expected factors below 1 (the depth is a fraction of the total thickness)",
+            "shapes.fusiform.wound_length_factor",
+            "expected factors above 1 (the length is a multiple of the width), got "
+            f"{min(shapes['fusiform']['wound_length_factor'])!r}",
         )
 
     exclude = data.get("exclude") or []

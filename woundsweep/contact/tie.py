@@ -53,7 +53,10 @@ class ZoneTie:
         X = np.asarray(X, dtype=float)
         left = np.asarray(left_nodes, dtype=np.int64)
         right = np.asarray(right_nodes, dtype=np.int64)
-        left = left[np.abs(X[left, 0] - x_c) > 0]  # a node on the mirror plane is its own image
+        tol = 1e-9 * float(np.ptp(X, axis=0).max())
+        # A node on the mirror plane is its own image (a P2 edge node on it may be a rounding
+        # error off it: the excision's zone reaches the plane at its apices).
+        left = left[np.abs(X[left, 0] - x_c) > tol]
         self.n_dofs = 3 * len(X)
         if len(left) == 0 or len(right) == 0:
             self.pairs = np.zeros((0, 2), dtype=np.int64)
@@ -62,7 +65,6 @@ class ZoneTie:
             image = X[left].copy()
             image[:, 0] = 2.0 * x_c - image[:, 0]
             dist, idx = cKDTree(X[right]).query(image)
-            tol = 1e-9 * float(np.ptp(X, axis=0).max())
             if np.any(dist > tol):
                 raise ValueError(
                     f"{int(np.sum(dist > tol))} closure-zone nodes have no mirror image "

@@ -14,8 +14,8 @@ __all__ = [
     "SURROGATE_FORMAT",
 ]
 
-# The result file's footer and fingerprint layout (`woundsweep.store.identity`).
-RESULT_FORMAT_VERSION = 3
+# The result file's columns, footer and fingerprint layout (`woundsweep.store.identity`).
+RESULT_FORMAT_VERSION = 4
 # What the six stages solve (docs/model.md, "The six stages": their loads, the closure load of
 # stages 3-6, contact and tie). Part of a result's fingerprint.
 STAGES_VERSION = 2

@@ -71,7 +71,7 @@ def _cells_estimate(row: JobRow) -> float:
         for k in range(_GRID):
             h = mesh_size_mm(spec, x, 0.0, -T + (k + 0.5) * dz)
             total += 6.0 * math.sqrt(2.0) / h**3  # cells per mm^3: regular tetrahedra of edge h
-    return total * dx * dz * 2 * L
+    return total * dx * dz * 2 * spec.patch_half_length_y_mm  # the excision's patch: 2L + l
 
 
 def estimate_cost(manifest: pd.DataFrame) -> np.ndarray:

@@ -5,7 +5,8 @@ fragment, and the closure zone's border lines are imprinted on the wound face, s
 union of whole facets, tagged WOUND_ZONE) under the size law of `woundsweep.mesh.sizing`, and the quarter is mirrored about
 x = w/2 and y = 0 in numpy. The mesh is therefore exactly mirror-symmetric, which the closure
 boundary condition at x = w/2 relies on, and it costs a quarter of a full build. Cell and
-facet tags are those of `woundsweep.core.schema`.
+facet tags are those of `woundsweep.core.schema`. The fusiform excision's quarter is built by
+`woundsweep.mesh.fusiform`; its patch extends L beyond the wound along y too.
 """
 
 from __future__ import annotations
@@ -34,6 +35,7 @@ from ..core.schema import (
     Y_MAX,
     Y_MIN,
 )
+from .fusiform import fusiform_quarter
 from .sizing import MESH_LAW_VERSION, SIZE_LAW, mesh_size_mm, size_scale, wound_size
 
 __all__ = ["MeshData", "build_mesh", "signed_volumes"]
@@ -95,6 +97,9 @@ def _gmsh_model(name: str) -> Iterator[None]:
 
 def _quarter_geometry(spec: GeometrySpec) -> None:
     """OCC model of the quarter x <= w/2, y >= 0 with two conforming layer volumes."""
+    if spec.shape == "fusiform":
+        fusiform_quarter(spec)
+        return
     occ = gmsh.model.occ
     t_d, T, L = spec.dermal_thickness_mm, spec.total_thickness_mm, spec.patch_half_length_mm
     w, d = spec.wound_width_mm, spec.wound_depth_mm
@@ -133,7 +138,7 @@ def _quarter_geometry(spec: GeometrySpec) -> None:
 def zone_limits(spec: GeometrySpec) -> tuple[float, float]:
     """The closure zone's bounds: |y| <= y_max (mm) and z >= z_min (mm)."""
     return (
-        spec.zone_y_fraction * spec.patch_half_length_mm,
+        spec.zone_y_fraction * spec.wound_half_length_mm,
         -spec.zone_depth_fraction * spec.wound_depth_mm,
     )
 
@@ -190,7 +195,7 @@ def _classify(spec: GeometrySpec) -> tuple[dict[int, int], dict[int, int], dict[
         (0, -L): X_MIN,
         (0, xc): None,
         (1, 0.0): None,
-        (1, L): Y_MAX,
+        (1, spec.patch_half_length_y_mm): Y_MAX,
         (2, 0.0): TOP,
         (2, -T): BOTTOM,
         (2, -t_d): None,

@@ -1,6 +1,7 @@
 """The mesh size law (version ``MESH_LAW_VERSION``): target edge length at a point (pure Python).
 
-With D the distance (mm) from the wound surface, zeta = max(0, -z - t_d) / t_d the depth
+With D the distance (mm) from the wound surface (for the fusiform excision `Lens.distance`:
+in plan to its outline, combined with the height below its floor), zeta = max(0, -z - t_d) / t_d the depth
 below the layer interface in dermal thicknesses, m the mesh size factor,
 s = (0.5 / m)^(2/3) and p the element degree::
 
@@ -79,9 +80,11 @@ def wound_size(spec: GeometrySpec) -> float:
 
 def mesh_size_mm(spec: GeometrySpec, x: float, y: float, z: float) -> float:
     """Target edge length (mm) at a point: the size law of the module docstring."""
-    del y  # the wound and the layers are uniform along y
     t_d = spec.dermal_thickness_mm
-    dist = wound_distance_mm(spec, x, z)
+    if spec.shape == "fusiform":
+        dist = spec.lens().distance(x, y, z)
+    else:  # the trenches and the layers are uniform along y
+        dist = wound_distance_mm(spec, x, z)
     zeta = max(0.0, -z - t_d) / t_d
     near = wound_size(spec) + SIZE_LAW["wound_growth"] * dist
     layer = (SIZE_LAW["layer_per_dermis"] * t_d + SIZE_LAW["layer_growth"] * dist) * (

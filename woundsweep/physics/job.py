@@ -33,7 +33,7 @@ from ..core.diagnostics import StageDiagnostics, StageReport
 from ..core.errors import GeometryError, SolverError, WoundsweepError
 from ..core.schema import ExitCode, StageResult, StageStatus, start_stage
 from .closure import LineLoads
-from .profiles import line_maxima, locate_cells, profile_lines, sample_profiles
+from .profiles import line_maxima, locate_cells, profile_lines, sample_profiles, wound_edge_x
 
 if TYPE_CHECKING:
     from ..config.manifest import JobRow, Run
@@ -198,7 +198,7 @@ def run_stages(
     dofs = d.n_dofs
     cells = len(d.cells)
     cell_input_order = np.argsort(d.cell_input)
-    lines = profile_lines(d.X)
+    lines = profile_lines(d.X, wound_edge_x(d.points, d.facets, d.facet_tags))
     line_cells = locate_cells(d, lines.reshape(-1, 3)).reshape(lines.shape[:2])
     records: list[StageRecord] = []
     status = {0: StageStatus.CONVERGED}
@@ -285,7 +285,8 @@ def write_output(
         for r in keep
         if r.displacement_mm is not None and r.von_mises_kPa is not None
     }
-    lines = profile_lines(mesh.points).astype(np.float32)
+    edge = wound_edge_x(mesh.points, mesh.facets, mesh.facet_tags)
+    lines = profile_lines(mesh.points, edge).astype(np.float32)
     profiles: dict[int, dict[str, np.ndarray]] = {}
     for r in keep:
         k = r.result.stage

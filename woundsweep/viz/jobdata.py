@@ -20,6 +20,7 @@ import pandas as pd
 from ..config.manifest import JobRow, Run
 from ..core.errors import StoreError
 from ..core.schema import StageStatus
+from ..store.reader import store_file_names
 from ..store.solverfile import MESH_GROUP, STAGE_DATASETS, stage_group
 from .surface import closure_zone_facets
 
@@ -90,6 +91,14 @@ def _read_h5(path: Path) -> tuple[dict[str, Any], dict[str, dict[str, np.ndarray
     return attrs, groups
 
 
+def _plain_names(job: JobRow, fields_file: str, mesh_file: str) -> None:
+    """File names read from the store stay inside RUN_DIR/fields (`store_file_names`)."""
+    try:
+        store_file_names({"fields_file": fields_file, "mesh_file": mesh_file}, job["job_id"])
+    except StoreError as err:
+        raise StoreError(f"job {job['job_index']}: {err}") from None
+
+
 def _mesh_arrays(run: Run, job: JobRow, groups: dict[str, Any], mesh_file: str):
     if MESH_GROUP in groups:
         mesh = groups[MESH_GROUP]
@@ -154,6 +163,7 @@ def load_job(
         raise StoreError(f"job {job['job_index']} has no stored result yet (run `woundsweep run`)")
     fields_file = str(rows[0]["fields_file"] or "")
     mesh_file = str(rows[0]["mesh_file"] or "")
+    _plain_names(job, fields_file, mesh_file)
     groups: dict[str, Any] = {}
     stored: list[int] = []
     if fields_file:
@@ -162,6 +172,7 @@ def load_job(
             raise StoreError(f"fields/{fields_file}: holds job {attrs.get('job_id')!r}")
         stored = [int(k) for k in json.loads(attrs.get("stored_stages", "[]"))]
         mesh_file = str(attrs.get("mesh_file", mesh_file) or mesh_file)
+        _plain_names(job, fields_file, mesh_file)
     key = (str(job["geometry_id"]), mesh_file)
     if MESH_GROUP not in groups and cache is not None and key in cache:
         points, cells, cell_tags, facets, facet_tags, in_zone = cache[key]

@@ -8,9 +8,10 @@ from pathlib import Path
 import click
 import pandas as pd
 
+from ..config.geometry import GeometrySpec
 from ..config.manifest import expand
-from ..config.sweep import MANIFEST_COLUMNS, MAX_JOBS, parse_sweep_text, read_sweep_text
-from ..core.errors import StoreError, SweepError
+from ..config.sweep import MANIFEST_COLUMNS, MAX_JOBS, Sweep, parse_sweep_text, read_sweep_text
+from ..core.errors import GeometryError, StoreError, SweepError
 from ..core.fsutil import atomic_write, atomic_write_bytes
 from ..core.provenance import provenance
 
@@ -59,6 +60,18 @@ def stale_results(run_dir: Path, sweep, manifest: pd.DataFrame) -> tuple[int, in
     return stale, orphans
 
 
+def _check_cell_cap(sweep: Sweep, manifest: pd.DataFrame) -> None:
+    """Every geometry's mesh within `mesh.sizing.MAX_CELLS` by the size law (no gmsh)."""
+    from ..mesh.sizing import check_cell_cap
+
+    for row in manifest.drop_duplicates("geometry_id").to_dict("records"):
+        spec = GeometrySpec.from_row(row, sweep.stages.closure_zone, sweep.solver.element_degree)
+        try:
+            check_cell_cap(spec)
+        except GeometryError as err:
+            raise SweepError(sweep.path, "grid", str(err)) from None
+
+
 def generate(
     sweep_path: str | Path,
     run_dir: str | Path,
@@ -75,6 +88,7 @@ def generate(
     text = read_sweep_text(sweep_path)
     sweep = parse_sweep_text(text, sweep_path)
     manifest = expand(sweep, max_jobs)
+    _check_cell_cap(sweep, manifest)
     rd = Path(run_dir)
     if rd.exists() and not rd.is_dir():
         raise StoreError(f"{rd}: exists and is not a directory")

@@ -14,6 +14,21 @@ def _mb(n: float) -> str:
     return f"{n / 1e6:.1f} MB"
 
 
+# The run's own directories: a site written there would mix with (or replace) the store.
+_RUN_PARTS = ("results", "fields", "logs", "meshes", "tmp", "corrupt", "analysis", "slurm")
+
+
+def _check_out(run_dir: Path, out: Path) -> None:
+    """--out must not be the run directory, hold it, or be one of its store's directories."""
+    from ..core.errors import StoreError
+
+    rd, target = run_dir.resolve(), out.resolve()
+    if target == rd or target in rd.parents or (target.parent == rd and target.name in _RUN_PARTS):
+        raise StoreError(
+            f"--out {out}: would write into the run directory {run_dir} (use a new directory)"
+        )
+
+
 @click.command("atlas")
 @click.argument("run_dir", type=click.Path(file_okay=False, path_type=Path))
 @click.option(
@@ -42,6 +57,7 @@ def cmd(run_dir: Path, out: Path | None, views: str) -> None:
 
     run = load_run(run_dir)
     out = out or run.run_dir / "atlas"
+    _check_out(run.run_dir, out)
     chosen = parse_views(views, [int(j) for j in run.manifest["job_index"]])
     n_files = len(list((run.run_dir / "results").glob("job-*.parquet")))
     click.echo(f"reading and validating {n_files} result files ...", err=True)

@@ -35,7 +35,7 @@ from typing import Any, NamedTuple
 import pandas as pd
 
 from ..config.manifest import JobRow, load_run
-from ..core.errors import StoreError, WoundsweepError
+from ..core.errors import StoreError, WoundsweepError, one_line
 from ..core.faults import ATTEMPT_ENV
 from ..core.schema import FailureClass, ResultState
 from ..store.writer import AttemptOutcome, Store
@@ -179,6 +179,12 @@ class _Runner:
             att.max_rss = max(att.max_rss, usage.ru_maxrss * 1024)  # ru_maxrss is in KiB
         log = self.store.log_path(job.job_id)
         cls = classify(att, status, self.opts.stages, self.opts.max_memory_bytes, log)
+        if cls.disk_full:
+            att.out.unlink(missing_ok=True)
+            raise StoreError(
+                f"{self.run_dir}: cannot write the store ({cls.disk_full}): job {job.index} "
+                f"stopped, nothing stored for it; free space and rerun (see {log})"
+            )
         with open(log, "ab") as fh:
             fh.write(
                 f"=== attempt {job.attempts} ended: {cls.failure_class}"
@@ -234,7 +240,7 @@ def _store(store: Store, row: JobRow, outcome: AttemptOutcome, opts: RunOptions)
         store.write_job(row, outcome, opts.stages, opts.fields, str(opts.shard))
         return
     except OSError as err:
-        if err.errno in (errno.ENOSPC, errno.EDQUOT, errno.EROFS):
+        if err.errno in (errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EFBIG):
             raise StoreError(f"{store.run_dir}: cannot write the store ({err.strerror})") from None
         detail = f"output could not be stored: {err}"
     except (KeyError, ValueError, TypeError) as err:
@@ -286,7 +292,10 @@ def run_shard(run_dir: str | Path, opts: RunOptions) -> RunSummary:
             ResultState.DAMAGED,
         ):  # damaged: its fields or mesh file go too
             moved = store.quarantine(jid, files=st.state == ResultState.DAMAGED)
-            print(f"woundsweep run: {st.reason}; moved to {moved}, rerunning", file=sys.stderr)
+            print(
+                one_line(f"woundsweep run: {st.reason}; moved to {moved}, rerunning"),
+                file=sys.stderr,
+            )
         elif st.state == ResultState.DONE and not (
             opts.rerun_failed and st.failure_class != FailureClass.CONVERGED
         ):

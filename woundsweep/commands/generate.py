@@ -14,6 +14,7 @@ from ..config.sweep import MANIFEST_COLUMNS, MAX_JOBS, Sweep, parse_sweep_text, 
 from ..core.errors import GeometryError, StoreError, SweepError
 from ..core.fsutil import atomic_write, atomic_write_bytes
 from ..core.provenance import provenance
+from ..core.runlock import hold_run, release
 
 __all__ = ["cmd", "generate", "stale_results"]
 
@@ -108,6 +109,21 @@ def generate(
                 f"{rd / 'manifest.parquet'}: missing, damaged or not the expansion of "
                 f"{rd / 'sweep.yaml'} (use --force to rewrite it; results are kept)"
             )
+    # Over an existing run, only while no `woundsweep run` holds it: a runner stamps its
+    # results with the sweep it loaded when it started.
+    lock = hold_run(rd, exclusive=True) if old is not None else None
+    try:
+        _write_run(rd, sweep_path, text, sweep, manifest, new)
+    finally:
+        if lock is not None:
+            release(lock)
+    return len(manifest), True
+
+
+def _write_run(
+    rd: Path, sweep_path: str | Path, text: str, sweep: Sweep, manifest: pd.DataFrame, new: dict
+) -> None:
+    """Write the manifest, the provenance record and (last) the sweep copy."""
     try:
         rd.mkdir(parents=True, exist_ok=True)
         atomic_write(rd / "manifest.parquet", lambda tmp: manifest.to_parquet(tmp, index=False))
@@ -125,7 +141,6 @@ def generate(
     except OSError as err:
         where = err.filename or rd
         raise StoreError(f"{where}: cannot write the run directory ({err.strerror})") from None
-    return len(manifest), True
 
 
 @click.command("generate")

@@ -56,6 +56,18 @@ def parse_params(shape: str, skin_type: str, numeric: dict[str, float | None]) -
     }
 
 
+def _warn_if_stale(loaded: Any) -> None:
+    """A line on stderr when the model's run has changed its settings since `analyze`."""
+    from ..analysis.trained_on import model_run_dir, stale_note
+    from ..core.errors import one_line
+
+    run_dir = model_run_dir(loaded.path)
+    if run_dir is not None and (run_dir / "manifest.parquet").is_file():
+        note = stale_note(run_dir, loaded.meta.get("trained_on"))
+        if note:
+            click.echo(one_line(f"woundsweep: warning: {note}"), err=True)
+
+
 @click.command("predict")
 @click.argument("model", type=click.Path(path_type=Path))
 @click.option(
@@ -105,6 +117,7 @@ def cmd(
         q, scheme_name = int(loaded.meta["quantiles"]), str(loaded.meta["scheme"])
     except (AttributeError, TypeError, KeyError, ValueError) as err:  # e.g. metadata `null`
         raise AnalysisError(f"{model}: malformed model metadata ({type(err).__name__})") from None
+    _warn_if_stale(loaded)
     params = parse_params(shape, skin_type, numeric)
     answer = predict_wound(loaded, params, list(stages) or None, allow_extrapolation, level)
     preds = answer.stages

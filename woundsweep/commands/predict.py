@@ -10,6 +10,7 @@ from typing import Any
 
 import click
 
+from ..analysis.prediction import MAX_PARAMETER
 from ..clitypes import FiniteFloat
 
 __all__ = ["cmd", "parse_params"]
@@ -41,9 +42,8 @@ _NUMERIC_PARAMS = (
 def _numeric_params(f: Callable[..., None]) -> Callable[..., None]:
     """One float option per `_NUMERIC_PARAMS` entry, in that order, named by its column."""
     for flag, column, required, text in reversed(_NUMERIC_PARAMS):
-        f = click.option(
-            flag, column, type=FiniteFloat(), required=required, default=None, help=text
-        )(f)
+        kind = FiniteFloat(-MAX_PARAMETER, MAX_PARAMETER)  # float32 in the models: bounded
+        f = click.option(flag, column, type=kind, required=required, default=None, help=text)(f)
     return f
 
 

@@ -55,7 +55,7 @@ def solver_file(
                 "stage": k, "status": status, "newton_iterations": 3 + k, "time_s": 0.5 * k,
                 "p99_von_mises_kPa": 10.0 * k, "p99_von_mises_nodal_kPa": 11.0 * k,
                 "max_von_mises_kPa": 20.0 * k, "max_location_x_mm": 0.1, "max_location_y_mm": 0.2,
-                "max_location_z_mm": -0.3, "closure_gap_mm": 0.01 * k, "min_J": 0.8,
+                "max_location_z_mm": -0.3, "closure_gap_max_mm": 0.01 * k, "min_J": 0.8,
                 "n_penetrating": 0, "max_penetration_mm": 0.0, "contact_force_mN": 0.0,
                 "residual_norm": 1e-9, "dofs": 3 * n, "cells": m, "future_field": k,
             }  # fmt: skip

@@ -141,7 +141,7 @@ def write_store(
     rows["max_von_mises_kPa"] = s * 1.5
     for k, v in _locations(rows, rng).items():
         rows[k] = v
-    rows["closure_gap_mm"] = np.where(rows["stage"] >= 2, 0.01, np.nan)
+    rows["closure_gap_max_mm"] = np.where(rows["stage"] >= 2, 0.01, np.nan)
     rows["min_J"] = 0.9
     rows["n_penetrating"] = 0
     rows["max_penetration_mm"] = 0.0

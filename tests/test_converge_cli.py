@@ -39,7 +39,7 @@ def test_converge_writes_levels_orders_and_a_figure(run_dir: Path, capsys) -> No
     args = ["converge", str(run_dir), "--job", "0", "--levels", "3", "--ratio", "1.3"]
     assert main([*args, "--stages", "1-3"]) == 0
     out = capsys.readouterr().out
-    assert "p99 vM kPa" in out and "tau kPa" in out and "GCI %" in out
+    assert "p99 vM kPa" in out and "closing kPa" in out and "GCI %" in out
     study = json.loads((run_dir / "convergence" / "job_0.json").read_text())
     levels = study["levels"]
     assert [lv["mesh_size_factor"] for lv in levels] == pytest.approx([0.2, 0.26, 0.338])
@@ -139,8 +139,9 @@ def test_solve_flags_interpenetration_and_stores_profiles(run_dir: Path) -> None
         prof = {k: f[f"stage_{k}/profile_von_mises_kPa"][:] for k in (1, 2, 3)}
         pts = f["stage_1/profile_points_mm"][:]
         vm1 = f["stage_1/von_mises_kPa"][:]
-    assert [r["interpenetrating"] for r in rows[:2]] == [None, None]
-    assert rows[2]["interpenetrating"] == int(rows[2]["closure_gap_mm"] < 0)
+    assert [r["closed"] for r in rows] == [None, 1, 1]  # stage 1 is open by design
+    w = rows[0]["closure_gap_median_mm"] / rows[0]["closure_gap_median_per_w"]
+    assert rows[2]["interpenetrating"] == int(rows[2]["closure_overlap_mm"] > 0.01 * w)
     assert pts.shape == (3, PROFILE_POINTS, 3) and prof[1].shape == (3, PROFILE_POINTS)
     # Sampled values are cell values, the maxima are those of the profiles.
     finite = prof[1][np.isfinite(prof[1])]

@@ -1,26 +1,13 @@
-"""The stage-3 interpenetration flag: set from the closure gap, counted and optionally left out."""
+"""The interpenetration flag (mirrored zone points overlap) counted and optionally left out of
+the stress model; the flag itself is tested in test_closure.py."""
 
 from __future__ import annotations
-
-import math
 
 import pandas as pd
 import pytest
 
 from woundsweep.analysis.data import select_rows
 from woundsweep.analysis.settings import STRESS
-from woundsweep.core.schema import StageResult, stage_field_kinds
-from woundsweep.physics.job import interpenetration_flag
-
-
-def test_flag_is_stage_three_and_negative_gap_only() -> None:
-    assert interpenetration_flag(3, -0.15) == 1
-    assert interpenetration_flag(3, 0.13) == 0
-    assert interpenetration_flag(3, 0.0) == 0  # touching is not overlapping
-    assert interpenetration_flag(3, math.nan) is None and interpenetration_flag(3, None) is None
-    assert interpenetration_flag(2, -1e-12) is None and interpenetration_flag(4, -0.2) is None
-    assert stage_field_kinds()["interpenetrating"] is int  # an int64 column in the store
-    assert StageResult(3, "converged").interpenetrating is None
 
 
 def frame() -> pd.DataFrame:

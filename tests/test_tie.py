@@ -69,41 +69,45 @@ def test_tie_is_inert_until_set_and_after_release() -> None:
     assert tie.energy(u, K_V) == 0.0 and not tie.slip(u).any()
 
 
-def test_mirror_symmetric_motion_carries_no_tie_force() -> None:
+def test_motion_of_the_pairs_together_carries_no_tie_force() -> None:
+    """The tie holds the pairs' relative offset only: a pair moving together (any rigid motion
+    of the closed zone, e.g. off the mid-plane at 45 degrees) carries nothing, while a
+    mirror-symmetric opening (u_x odd across x = x_c) is held."""
     X, left, right, facets, _ = _flanks()
     tie = ZoneTie(X, left, right, facets, X_C)
     rng = np.random.default_rng(2)
-    u0 = np.zeros(X.size)
-    tie.set_reference(u0)
-    # A mirror-symmetric field: u_x odd, u_y and u_z even across x = x_c (the 0 and 90 degree
-    # solutions), on the pairs.
+    tie.set_reference(np.zeros(X.size))
     u = np.zeros((len(X), 3))
     f = rng.standard_normal((len(tie), 3))
     u[tie.pairs[:, 0]] = f
-    u[tie.pairs[:, 1]] = f * np.array([-1.0, 1.0, 1.0])
+    u[tie.pairs[:, 1]] = f
     assert tie.energy(u.ravel(), K_V) == 0.0
     assert not tie.force_vector(u.ravel(), K_V).any()
-    # Any normal (x) motion is left to the contact.
-    u[:, 0] = rng.standard_normal(len(X))
-    assert not tie.force_vector(u.ravel(), K_V).any()
+    u[tie.pairs[:, 1]] = f * np.array([-1.0, 1.0, 1.0])  # the flanks open or close
+    opening = 2.0 * f[:, 0]
+    fv = tie.force_vector(u.ravel(), K_V).reshape(-1, 3)
+    np.testing.assert_allclose(fv[tie.pairs[:, 0], 0], K_V * tie.weight * opening, rtol=1e-12)
+    assert not fv[:, 1:].any()
 
 
-def test_a_uniform_slip_gives_the_penalty_law_force() -> None:
+@pytest.mark.parametrize("comp", [0, 1, 2])
+def test_a_uniform_offset_gives_the_penalty_law_force(comp: int) -> None:
     X, left, right, facets, _ = _flanks()
     tie = ZoneTie(X, left, right, facets, X_C)
     tie.set_reference(np.zeros(X.size))
-    delta = np.array([3e-4, -1e-4])  # y, z slip of the left flank against the right (mm)
+    delta = np.zeros(3)
+    delta[comp] = 3e-4  # offset of the left flank against the right (mm)
+    delta[(comp + 1) % 3] = -1e-4
     u = np.zeros((len(X), 3))
-    u[left, 1:] = delta
+    u[left] = delta
     u = u.ravel()
     np.testing.assert_allclose(tie.slip(u), np.tile(delta, (len(tie), 1)), atol=1e-18)
     c = K_V * tie.weight  # mN/mm per pair
     f = tie.force_vector(u, K_V).reshape(-1, 3)
-    np.testing.assert_allclose(f[tie.pairs[:, 0], 1:], c[:, None] * delta, rtol=1e-12)
-    np.testing.assert_allclose(f[tie.pairs[:, 1], 1:], -c[:, None] * delta, rtol=1e-12)
-    assert not f[:, 0].any()
+    np.testing.assert_allclose(f[tie.pairs[:, 0]], c[:, None] * delta, rtol=1e-12, atol=1e-18)
+    np.testing.assert_allclose(f[tie.pairs[:, 1]], -c[:, None] * delta, rtol=1e-12, atol=1e-18)
     assert tie.energy(u, K_V) == pytest.approx(0.5 * c.sum() * (delta @ delta), rel=1e-12)
-    assert tie.force_mN(u, K_V) == pytest.approx(c.sum() * np.hypot(*delta), rel=1e-12)
+    assert tie.force_mN(u, K_V) == pytest.approx(c.sum() * np.linalg.norm(delta), rel=1e-12)
 
 
 def test_force_and_tangent_are_the_derivatives_of_the_energy() -> None:

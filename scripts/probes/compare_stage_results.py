@@ -20,7 +20,7 @@ from typing import Any
 __all__ = ["compare", "main"]
 
 CHECKED = ("max_von_mises_kPa", "p99_von_mises_kPa")
-SHOWN = ("newton_iterations", "closure_gap_mm", "min_J", "contact_force_mN", "time_s")
+SHOWN = ("newton_iterations", "closure_gap_max_mm", "min_J", "contact_force_mN", "time_s")
 
 
 def load(path: str) -> tuple[dict[str, Any], list[dict[str, Any]]]:

@@ -84,17 +84,26 @@ def drop_orphans(results: pd.DataFrame, run_dir: Path) -> tuple[pd.DataFrame, in
     return results[in_manifest], int((~in_manifest).sum())
 
 
+def _flag(df: pd.DataFrame, name: str) -> pd.Series:
+    """A 0/1 column as numbers (NaN where it does not apply or is absent)."""
+    if name not in df:
+        return pd.Series(np.nan, index=df.index)
+    return pd.to_numeric(df[name], errors="coerce").astype(float)
+
+
 def select_rows(
-    df: pd.DataFrame, drop_interpenetrating: bool = False
+    df: pd.DataFrame, drop_interpenetrating: bool = False, keep_reopened: bool = False
 ) -> tuple[pd.DataFrame, dict[str, Any]]:
-    """Converged rows with a finite, positive maximal stress (without the stage-3 rows whose
-    flanks interpenetrate if ``drop_interpenetrating``); and the row counts."""
+    """Converged rows with a finite, positive maximal stress, without the rows whose sutured
+    zone has reopened (``closed`` = 0) unless ``keep_reopened``, and without the rows whose
+    flanks interpenetrate if ``drop_interpenetrating``; and the row counts."""
     converged = df["status"].astype(str) == StageStatus.CONVERGED.value
     stress = pd.to_numeric(df[STRESS], errors="coerce")
     positive = converged & np.isfinite(stress) & (stress > 0)
-    flag = df["interpenetrating"] if "interpenetrating" in df else pd.Series(0, index=df.index)
-    overlap = positive & (pd.to_numeric(flag, errors="coerce") == 1)
-    rows = df[positive & ~(overlap & drop_interpenetrating)].reset_index(drop=True)
+    overlap = positive & (_flag(df, "interpenetrating") == 1)
+    reopened = positive & (_flag(df, "closed") == 0)
+    drop = (overlap & drop_interpenetrating) | (reopened & (not keep_reopened))
+    rows = df[positive & ~drop].reset_index(drop=True)
     counts = {
         "store_rows": int(len(df)),
         "jobs": int(df["job_id"].nunique()),
@@ -102,6 +111,8 @@ def select_rows(
         "used_rows": int(len(rows)),
         "interpenetrating_rows": int(overlap.sum()),
         "interpenetrating_dropped": bool(drop_interpenetrating),
+        "reopened_rows": int(reopened.sum()),
+        "reopened_dropped": not keep_reopened,
         "status": {
             str(k): int(v) for k, v in df["status"].astype(str).value_counts().sort_index().items()
         },

@@ -75,6 +75,7 @@ def run_analysis(
     out_dir: str | Path | None = None,
     echo: Callable[[str], None] | None = None,
     drop_interpenetrating: bool = False,
+    keep_reopened: bool = False,
 ) -> AnalysisOutput:
     """Fit and evaluate each scheme; write metrics, models, figures and report.md.
 
@@ -99,7 +100,7 @@ def run_analysis(
     q = settings.quantiles
     results, orphans = drop_orphans(load_results(rd), rd)
     record = trained_on(rd, results)
-    rows, counts = select_rows(results, drop_interpenetrating)
+    rows, counts = select_rows(results, drop_interpenetrating, keep_reopened)
     counts["rows_not_in_manifest"] = orphans
     if len(rows) < MIN_ROWS_PER_QUANTILE * q:
         raise AnalysisError(

@@ -61,8 +61,10 @@ def render_report(metrics: dict[str, Any], figures: Sequence[str]) -> str:
         f"Maximal stress = `{metrics['stress']}` (kPa). Rows: {rows['store_rows']} in the store "
         f"({rows['jobs']} jobs), {rows['converged_rows']} converged, {rows['used_rows']} used "
         f"(converged, stress > 0). {q} quantile classes: chance is accuracy {1 / q:.3f}, AUC 0.5.",
-        f"Stage-3 rows whose flanks interpenetrate (closure gap < 0): "
-        f"{rows.get('interpenetrating_rows', 0)}"
+        f"Rows whose sutured zone has reopened (surface gap above the closure tolerance): "
+        f"{rows.get('reopened_rows', 0)}"
+        f"{', left out' if rows.get('reopened_dropped', True) else ', kept'}; rows whose "
+        f"mirrored zone points overlap: {rows.get('interpenetrating_rows', 0)}"
         f"{', left out' if rows.get('interpenetrating_dropped') else ', kept'}.",
         "",
         "## Stress-quantile model (test rows; Figure 3)",

@@ -82,7 +82,11 @@ def summary_lines(metrics: dict[str, Any]) -> list[str]:
 )  # fmt: skip
 @click.option(
     "--drop-interpenetrating", is_flag=True,
-    help="Leave out the stage-3 rows whose flanks interpenetrate (closure gap < 0).",
+    help="Leave out the rows whose mirrored zone points overlap (interpenetrating = 1).",
+)  # fmt: skip
+@click.option(
+    "--keep-reopened", is_flag=True,
+    help="Keep the rows whose sutured zone has reopened (closed = 0); left out by default.",
 )  # fmt: skip
 def cmd(
     run_dir: Path,
@@ -92,6 +96,7 @@ def cmd(
     nthread: int | None,
     params: tuple[str, ...],
     drop_interpenetrating: bool,
+    keep_reopened: bool,
 ) -> None:
     """Fit the stress-quantile model (XGBoost) and write RUN_DIR/analysis/.
 
@@ -108,7 +113,12 @@ def cmd(
             overrides[key] = value
     schemes = SCHEMES if split == "both" else (split,)
     result = run_analysis(
-        run_dir, overrides, schemes, echo=click.echo, drop_interpenetrating=drop_interpenetrating
+        run_dir,
+        overrides,
+        schemes,
+        echo=click.echo,
+        drop_interpenetrating=drop_interpenetrating,
+        keep_reopened=keep_reopened,
     )
     for line in summary_lines(result.metrics):
         click.echo(line)

@@ -28,10 +28,11 @@ __all__ = ["cmd", "study_lines"]
 _SHORT = {
     "p99_von_mises_kPa": "p99 vM kPa",
     "max_von_mises_kPa": "max vM kPa",
-    "closure_gap_mm": "gap mm",
+    "closure_gap_max_mm": "gap mm",
     "contact_force_mN": "contact mN",
     "closure_force_left_mN": "closure mN",
-    "closure_traction_kPa": "tau kPa",
+    "closure_traction_kPa": "closing kPa",
+    "closing_line_load_max_mN_per_mm": "line mN/mm",
 }
 
 

@@ -61,6 +61,17 @@ def format_status(s: dict[str, Any]) -> str:
         lines.append("by stage:  " + "".join(f"{st:>22}" for st in statuses))
         for stage, counts in s["by_stage"].items():
             lines.append(f"  stage {stage:<3}" + "".join(f"{counts[st]:>22}" for st in statuses))
+    reopened = s.get("reopened_by_stage") or {}
+    if reopened:
+        lines.append(
+            "reopened (converged, the sutured zone open at the surface): stage "
+            + ", ".join(f"{k}: {v}" for k, v in reopened.items())
+        )
+    if s.get("closure_rows"):
+        lines.append(
+            f"closure: sutured zone closed at the surface in {s['closed_rows']} of"
+            f" {s['closure_rows']} converged stage 2-6 rows"
+        )
     rate = s["throughput_jobs_per_hour"]
     lines.append(
         f"throughput: {'n/a' if rate is None else f'{rate:.1f} jobs/h'}"

@@ -3,7 +3,7 @@
 `ContactModel` is what the wound model needs from a formulation; `FlankContact` is the
 two-pass penalty on the flanks' smooth implicit surfaces (`woundsweep.contact.smooth`);
 `ContactMultipliers` carries its multipliers through Newton (the semi-smooth contact step,
-`woundsweep.contact.multipliers`); `ZoneTie` ties the closure zone's flanks tangentially
+`woundsweep.contact.multipliers`); `ZoneTie` holds the closure zone's flanks together (the sutures)
 (`woundsweep.contact.tie`).
 """
 

@@ -105,7 +105,8 @@ class FlankContact:
     ``X`` (n, 3) reference node coordinates; ``left`` and ``right`` (k, 3) outward-oriented
     facets in node numbering. ``k_V_kPa`` (attribute) is the penalty; 0 switches the contact
     terms off (gaps and penetrations are still measured). ``pattern_gap`` and
-    ``pattern_margin``: those of the coupling pattern (module docstring).
+    ``pattern_margin``: those of the coupling pattern (module docstring). ``tied`` nodes are
+    held by another law (the closure zone's tie) and are masters only, not contact points.
     """
 
     def __init__(
@@ -117,12 +118,16 @@ class FlankContact:
         radius_factor: float = 1.5,
         pattern_gap: float = PATTERN_GAP,
         pattern_margin: float = PATTERN_MARGIN,
+        tied: np.ndarray | None = None,
     ) -> None:
         self.X = np.asarray(X, dtype=float)
         self.n_dofs = 3 * len(self.X)
         sides = (np.asarray(left, dtype=np.int64), np.asarray(right, dtype=np.int64))
         self.surfaces = surfs = tuple(surface(self.X, f) for f in sides)
+        # Nodes held by another law (the zone tie) are masters only, never contact points.
         shared = np.intersect1d(surfs[0].nodes, surfs[1].nodes)
+        if tied is not None:
+            shared = np.union1d(shared, np.asarray(tied, dtype=np.int64))
         passes = []
         for i in (0, 1):
             sl, ms = surfs[i], surfs[1 - i]

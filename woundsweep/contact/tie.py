@@ -1,21 +1,24 @@
-"""Tangential tie of the closed flanks inside the closure zone (stages 4-6).
+"""The sutured zone's tie (stages 4-6): the closed flanks held together where they are sutured.
 
-The sutured part of a closed wound does not slide along itself. Each closure-zone node of the
-left flank is paired with its mirror image across x = x_c on the right flank (the mesh is
-mirror-symmetric, so the pairs are exact), and the pair's slip, the change of the y and z
-components of u_L - u_R since the tie was set (the stage-2 state, where the zone is closed by
-its Dirichlet condition), is held by the contact's penalty law applied tangentially::
+Each closure-zone node of the left flank is paired with its mirror image across x = x_c on the
+right flank (the mesh is mirror-symmetric, so the pairs are exact), and the pair's offset,
+the change of u_L - u_R since the tie was set (the stage-2 state, where the zone is closed by
+its Dirichlet condition), is held by the contact's penalty law in all three directions::
 
-    Pi_t = sum_p (1/2) c_p |s_p|^2,   s_p = T (u_L - u_R) - s0_p,   c_p = k_V A_p / h_p,
+    Pi_t = sum_p (1/2) c_p |s_p|^2,   s_p = (u_L - u_R) - s0_p,   c_p = k_V A_p / h_p,
 
-T the projection on y and z (the mid-plane's tangents), A_p and h_p the left node's lumped
-area and element size, k_V the stage's penalty. The normal direction is left to the contact.
+A_p and h_p the left node's lumped area and element size, k_V the stage's penalty. Across the
+wound (x) the tie is the suture: it keeps the closed zone closed against whatever pushes the
+flanks apart nearby; along it (y, z) it keeps the sutured flanks from sliding on each other.
+A tied node is not a contact point (`FlankContact`'s ``tied``): the tie already keeps it off
+its partner, and a second law on the same pair would fight the first at the scale of the
+implicit surface's O(h^2) offset from the facets.
 
-Why: without it the two halves of the patch, joined only beneath the wound, slide along the
-closed flanks almost freely at 45 degrees (lowest tangent eigenvalue about 1e-3 mN/mm), and
-that mode makes the contact stages' Newton iterations cycle (docs/model.md). At 0 and 90
-degrees the solution is mirror-symmetric, u_L and u_R have equal y and z components, and the
-tie carries no force.
+Why the tangential part: without it the two halves of the patch, joined only beneath the
+wound, slide along the closed flanks almost freely at 45 degrees (lowest tangent eigenvalue
+about 1e-3 mN/mm), and that mode makes the contact stages' Newton iterations cycle
+(docs/model.md). A pair offset stays zero where nothing else acts: the tie carries only what
+the closure load alone does not hold.
 """
 
 from __future__ import annotations
@@ -31,7 +34,7 @@ __all__ = ["ZoneTie"]
 
 
 class ZoneTie:
-    """Mirror pairs of closure-zone nodes tied tangentially (module docstring).
+    """Mirror pairs of closure-zone nodes tied together (module docstring).
 
     ``X`` (n, 3) reference node coordinates; ``left_nodes``, ``right_nodes`` the zone's nodes
     on each flank; ``left_facets`` the left flank's facets (node numbering, for A_p and h_p);
@@ -69,8 +72,8 @@ class ZoneTie:
             flank = surface(X, np.asarray(left_facets, dtype=np.int64))
             at = np.searchsorted(flank.nodes, left)
             self.weight = lumped_area(X, flank.facets, left) / flank.size_mm[at]  # A_p / h_p
-        self._dofs = np.concatenate([3 * self.pairs + k for k in (1, 2)], axis=0)  # (2p, 2)
-        self._w = np.tile(self.weight, 2)  # A_p / h_p per row of _dofs
+        self._dofs = np.concatenate([3 * self.pairs + k for k in (0, 1, 2)], axis=0)  # (3p, 2)
+        self._w = np.tile(self.weight, 3)  # A_p / h_p per row of _dofs
         self._s0: np.ndarray | None = None
         self._unit: Any = None  # the tangent for k_V = 1, built once
 
@@ -94,14 +97,15 @@ class ZoneTie:
         return self._s0 is not None and len(self.pairs) > 0
 
     def _slip_rows(self, u: np.ndarray) -> np.ndarray:
-        """Slip per row of ``_dofs`` (the y components, then the z ones); zeros while untied."""
+        """Offset change per row of ``_dofs`` (x, then y, then z components); zeros while
+        untied."""
         if not self.active:
             return np.zeros(len(self._dofs))
         return self._raw(u) - self._s0
 
     def slip(self, u: np.ndarray) -> np.ndarray:
-        """Slip (mm) of every pair, (p, 2): y and z components (zeros while untied)."""
-        return self._slip_rows(u).reshape(2, -1).T
+        """Offset change (mm) of every pair, (p, 3): x, y and z (zeros while untied)."""
+        return self._slip_rows(u).reshape(3, -1).T
 
     def energy(self, u: np.ndarray, k_V_kPa: float) -> float:
         """Tie energy (mN mm)."""
@@ -134,6 +138,6 @@ class ZoneTie:
         return type(K)((np.ones(K.nnz), K.indices, K.indptr), shape=K.shape)
 
     def force_mN(self, u: np.ndarray, k_V_kPa: float) -> float:
-        """Total tangential tie force, sum over pairs of |c_p s_p| (mN)."""
+        """Total tie force, sum over pairs of |c_p s_p| (mN)."""
         s = self.slip(u)
         return float(np.sum(k_V_kPa * self.weight * np.linalg.norm(s, axis=1)))

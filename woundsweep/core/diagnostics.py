@@ -31,7 +31,7 @@ class StageDiagnostics(TypedDict, total=False):
     closure_force_left_mN: float | None  # stage 2
     closure_force_right_mN: float | None
     lateral_force_mN: float | None
-    closure_traction_kPa: float | None  # stage 3
+    closure_traction_kPa: float | None  # stage 3: mean closing load per deformed zone area
     max_penetration_rel: float | None  # stages 4-6
     contact_penalty_kPa: float | None
     contact_detect_time_s: float | None
@@ -47,6 +47,10 @@ class StageDiagnostics(TypedDict, total=False):
     profile_through_thickness_max_at_mm: float | None
     profile_across_patch_max_kPa: float | None
     profile_across_patch_max_at_mm: float | None
+    closing_line_load_max_mN_per_mm: float | None  # converged wounded stages: line loads
+    closing_line_load_max_at_mm: float | None  # y of the maximum along the wound
+    contact_line_load_max_mN_per_mm: float | None
+    contact_line_load_max_at_mm: float | None
 
 
 DIAGNOSTIC_KEYS = frozenset(StageDiagnostics.__annotations__)

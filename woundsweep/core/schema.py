@@ -162,13 +162,22 @@ class StageResult(NamedTuple):
     max_location_x_mm: float | None = None
     max_location_y_mm: float | None = None
     max_location_z_mm: float | None = None
-    closure_gap_mm: float | None = None
+    # The closure along the wound (docs/model.md, "Closure measures"): the gap between mirror
+    # pairs of zone points at the skin surface, and the largest overlap over the zone.
+    closure_gap_min_mm: float | None = None
+    closure_gap_median_mm: float | None = None
+    closure_gap_max_mm: float | None = None
+    closure_gap_median_per_w: float | None = None  # fraction of the wound width
+    closure_gap_max_per_w: float | None = None
+    closure_overlap_mm: float | None = None
+    # Stages 2-6: 1 if the sutured zone is closed at the surface, 0 if it has reopened.
+    closed: int | None = None
+    # Stages 2-6: 1 if mirrored zone points overlap (the flanks pass through each other).
+    interpenetrating: int | None = None
     min_J: float | None = None
     n_penetrating: int | None = None  # contact stages (4-6) only
     max_penetration_mm: float | None = None  # contact stages only
     contact_force_mN: float | None = None  # contact stages only
-    # Stage 3 only: 1 if the flanks pass through each other (closure gap < 0), else 0.
-    interpenetrating: int | None = None
     residual_norm: float | None = None
     dofs: int | None = None
     cells: int | None = None

@@ -9,12 +9,16 @@ __all__ = [
     "MESH_LAW_VERSION",
     "MODEL_FORMAT",
     "RESULT_FORMAT_VERSION",
+    "STAGES_VERSION",
     "STATISTICS_VERSION",
     "SURROGATE_FORMAT",
 ]
 
 # The result file's footer and fingerprint layout (`woundsweep.store.identity`).
-RESULT_FORMAT_VERSION = 2
+RESULT_FORMAT_VERSION = 3
+# What the six stages solve (docs/model.md, "The six stages": their loads, the closure load of
+# stages 3-6, contact and tie). Part of a result's fingerprint.
+STAGES_VERSION = 2
 # The geometry and the mesh size law (`woundsweep.mesh.sizing`, the closure zone imprinted on
 # the wound surface, edges scaled with the element degree). Cached meshes and results of
 # another version are rebuilt.

@@ -35,6 +35,15 @@ def summarize(
     for stage, g in rows.groupby("stage", sort=True):
         counts = g["status"].value_counts()
         by_stage[str(int(stage))] = {s.value: int(counts.get(s.value, 0)) for s in StageStatus}
+    # Converged rows whose sutured zone has reopened (docs/model.md, "Closure measures").
+    reopened: dict[str, int] = {}
+    if "closed" in rows:
+        ok = rows["status"] == StageStatus.CONVERGED.value
+        open_rows = rows[ok & (rows["closed"] == 0)]
+        reopened = {str(int(k)): int(v) for k, v in open_rows["stage"].value_counts().items()}
+        reopened = dict(sorted(reopened.items()))
+    closed = rows["closed"] if "closed" in rows else pd.Series(dtype=float)
+    flagged = rows[(rows["status"] == StageStatus.CONVERGED.value) & closed.notna()]
     not_converged_at = {
         str(int(k)): int(v)
         for k, v in jobs["failed_stage"].dropna().value_counts().sort_index().items()
@@ -68,6 +77,9 @@ def summarize(
         "by_failure_class": by_class,
         "not_converged_at_stage": not_converged_at,
         "by_stage": by_stage,
+        "closed_rows": int((flagged["closed"] == 1).sum()) if len(flagged) else 0,
+        "closure_rows": int(len(flagged)),
+        "reopened_by_stage": reopened,
         "attempts": int(jobs["attempts"].sum()) if len(jobs) else 0,
         "wall_span_s": span,
         "throughput_jobs_per_hour": throughput,

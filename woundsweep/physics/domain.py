@@ -38,14 +38,12 @@ from .element import Element
 __all__ = [
     "LATERAL_DERMIS",
     "LATERAL_SUBCUTIS",
-    "ZONE_LEFT",
-    "ZONE_RIGHT",
     "WoundDomain",
     "dof_rows",
 ]
 
 # Facet ids the solver derives for its integrals (not part of the mesh contract).
-LATERAL_DERMIS, LATERAL_SUBCUTIS, ZONE_LEFT, ZONE_RIGHT = 101, 102, 103, 104
+LATERAL_DERMIS, LATERAL_SUBCUTIS = 101, 102
 
 
 def dof_rows(nodes: Any, comp: int) -> np.ndarray:
@@ -175,11 +173,7 @@ class WoundDomain:
             DERMIS: float(area[on_xmax & (layer == LATERAL_DERMIS)].sum()),
             SUBCUTIS: float(area[on_xmax & (layer == LATERAL_SUBCUTIS)].sum()),
         }
-        sel = np.concatenate([lateral, zone_left, zone_right])
-        vals = np.concatenate(
-            [layer, np.full(len(zone_left), ZONE_LEFT), np.full(len(zone_right), ZONE_RIGHT)]
-        )
-        self.solver_facet_mt = compat.facet_meshtags(self.mesh, facets[sel], vals)
+        self.solver_facet_mt = compat.facet_meshtags(self.mesh, facets[lateral], layer)
         self._point_constraints()
 
     def _closure_zone(self, facets: np.ndarray, ftags: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -233,16 +227,3 @@ class WoundDomain:
         if len(tri) == 0:
             return 0.0
         return float(triangle_areas((self.X + u.reshape(-1, 3))[tri]).sum())
-
-    def closure_gap(self, u: np.ndarray) -> float:
-        """Widest x-opening between the flanks in the closure zone (mm, deformed; NaN if no zone).
-
-        max over left-flank zone nodes of (x_c - x) plus max over right-flank zone nodes of
-        (x - x_c), x the deformed position: 0 when closed, negative when the flanks overlap.
-        """
-        if len(self.zone_left_nodes) == 0 or len(self.zone_right_nodes) == 0:
-            return float("nan")
-        ux = u.reshape(-1, 3)[:, 0]
-        xl = self.X[self.zone_left_nodes, 0] + ux[self.zone_left_nodes]
-        xr = self.X[self.zone_right_nodes, 0] + ux[self.zone_right_nodes]
-        return float(np.max(self.x_c - xl) + np.max(xr - self.x_c))

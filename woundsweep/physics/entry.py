@@ -24,7 +24,7 @@ __all__ = ["SweepChanged", "run_job", "solve"]
 
 _HEADER = (
     f"{'stage':>5} {'status':<21}{'newton':>7}{'time s':>8}{'p99 vM kPa':>12}"
-    f"{'max vM kPa':>12}{'gap mm':>9}{'min J':>8}"
+    f"{'max vM kPa':>12}{'gap mm':>9}{'closed':>7}{'min J':>8}"
 )
 
 
@@ -32,12 +32,16 @@ def _fmt(value: float | None, spec: str) -> str:
     return "-" if value is None else format(value, spec)
 
 
+def _closed(flag: int | None) -> str:
+    return "-" if flag is None else ("yes" if flag else "OPEN")
+
+
 def _row(r: StageResult) -> str:
     return (
         f"{r.stage:>5} {r.status:<21}{_fmt(r.newton_iterations, 'd'):>7}"
         f"{_fmt(r.time_s, '.2f'):>8}{_fmt(r.p99_von_mises_kPa, '.3f'):>12}"
-        f"{_fmt(r.max_von_mises_kPa, '.3f'):>12}{_fmt(r.closure_gap_mm, '.4f'):>9}"
-        f"{_fmt(r.min_J, '.3f'):>8}"
+        f"{_fmt(r.max_von_mises_kPa, '.3f'):>12}{_fmt(r.closure_gap_max_mm, '.4f'):>9}"
+        f"{_closed(r.closed):>7}{_fmt(r.min_J, '.3f'):>8}"
     )
 
 

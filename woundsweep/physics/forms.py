@@ -1,6 +1,6 @@
 """The compiled forms of the wound model: residual, Jacobian, potential energy and von Mises.
 
-All material parameters, tractions and the closure magnitude are ``fem.Constant``s, so the
+All material parameters and tractions are ``fem.Constant``s, so the
 forms compile once per machine and quadrature degree (FFCx bakes Python floats into the
 form signature; constants it does not). Units: mm, kPa, mN.
 """
@@ -19,7 +19,7 @@ from petsc4py import PETSc
 
 from ..core.schema import DERMIS, SUBCUTIS
 from . import compat
-from .domain import LATERAL_DERMIS, LATERAL_SUBCUTIS, ZONE_LEFT, ZONE_RIGHT, WoundDomain
+from .domain import LATERAL_DERMIS, LATERAL_SUBCUTIS, WoundDomain
 from .materials import Fung, JobMaterials, Material, MooneyRivlin, von_mises
 
 __all__ = ["STRESS_RULE_DEGREE", "StressSamples", "WoundForms"]
@@ -65,12 +65,10 @@ class WoundForms:
     """The unknown ``u``, the load constants and the four compiled forms on a `WoundDomain`.
 
     Loads: ``T_dermis`` and ``T_subcutis`` (3x3, the first Piola-Kirchhoff stress of each
-    layer's healthy-skin state, applied as P N on the lateral faces), ``tau`` (the closure
-    traction, kPa, toward the mid-plane on the zone facets). The closure traction per
-    reference area is ``tau`` times the Nanson factor |J F^-T N| of the area state
-    ``follow * u + (1 - follow) * u_area``: ``follow`` = 1 is a follower load (eq. 17),
-    ``follow`` = 0 a dead load on the fixed state ``u_area``. ``Pi_form`` is the potential
-    whose derivative is the residual while the closure is a dead load.
+    layer's healthy-skin state, applied as P N on the lateral faces, a dead load). The
+    closure load of stages 3-6 is a nodal force vector the problem adds
+    (`woundsweep.physics.problem`). ``Pi_form`` is the potential whose derivative is the
+    residual.
     """
 
     def __init__(
@@ -87,7 +85,6 @@ class WoundForms:
         sub_sym, self._sub_c = _symbolic(mesh, MooneyRivlin.subcutis())
         self.T_dermis = _constant(mesh, np.zeros((3, 3)))
         self.T_subcutis = _constant(mesh, np.zeros((3, 3)))
-        self.tau = _constant(mesh, 0.0)
         md = {"quadrature_degree": int(quadrature_degree)}
         dx = ufl.Measure("dx", domain=mesh, subdomain_data=domain.cell_mt, metadata=md)
         ds = ufl.Measure("ds", domain=mesh, subdomain_data=domain.solver_facet_mt, metadata=md)
@@ -95,30 +92,19 @@ class WoundForms:
         psi_d, psi_s = dermis_sym.strain_energy(F), sub_sym.strain_energy(F)
         P_d = ufl.diff(psi_d, F)
         P_s = ufl.diff(psi_s, F)
-        # Nanson (eq. 17): deformed area element per reference area of the area state.
-        self.follow = _constant(mesh, 1.0)
-        self.u_area = dolfinx.fem.Function(V)
-        Fa = ufl.Identity(d) + ufl.grad(self.follow * u + (1.0 - self.follow) * self.u_area)
-        Ja_N = ufl.det(Fa) * ufl.inv(Fa).T * N
-        nanson = ufl.sqrt(ufl.dot(Ja_N, Ja_N))
-
         R = (
             ufl.inner(P_d, ufl.grad(v)) * dx(DERMIS)
             + ufl.inner(P_s, ufl.grad(v)) * dx(SUBCUTIS)
             - ufl.dot(ufl.dot(self.T_dermis, N), v) * ds(LATERAL_DERMIS)
             - ufl.dot(ufl.dot(self.T_subcutis, N), v) * ds(LATERAL_SUBCUTIS)
-            - self.tau * nanson * v[0] * ds(ZONE_LEFT)
-            + self.tau * nanson * v[0] * ds(ZONE_RIGHT)
         )
         a = ufl.derivative(R, u, du)
-        # The same terms with u for v: the potential while the closure is a dead load.
+        # The same terms with u for v: every load is dead, so this is the potential.
         Pi = (
             psi_d * dx(DERMIS)
             + psi_s * dx(SUBCUTIS)
             - ufl.dot(ufl.dot(self.T_dermis, N), u) * ds(LATERAL_DERMIS)
             - ufl.dot(ufl.dot(self.T_subcutis, N), u) * ds(LATERAL_SUBCUTIS)
-            - self.tau * nanson * u[0] * ds(ZONE_LEFT)
-            + self.tau * nanson * u[0] * ds(ZONE_RIGHT)
         )
         Q = compat.dg0_space(mesh)
         q = ufl.TestFunction(Q)
@@ -151,15 +137,14 @@ class WoundForms:
         _assign(self._dermis_c, materials.dermis)
         _assign(self._sub_c, materials.subcutis)
 
-    def set_loads(self, T_dermis: Any, T_subcutis: Any, tau: float) -> None:
-        """Set the lateral tractions' stresses (3x3 each) and the closure traction (kPa)."""
+    def set_loads(self, T_dermis: Any, T_subcutis: Any) -> None:
+        """Set the lateral tractions' stresses (3x3 each, kPa)."""
         self.T_dermis.value[:] = T_dermis
         self.T_subcutis.value[:] = T_subcutis
-        self.tau.value = tau
 
-    def loads(self) -> tuple[np.ndarray, np.ndarray, float]:
-        """The current (T_dermis, T_subcutis, tau), copied."""
-        return self.T_dermis.value.copy(), self.T_subcutis.value.copy(), float(self.tau.value)
+    def loads(self) -> tuple[np.ndarray, np.ndarray]:
+        """The current (T_dermis, T_subcutis), copied."""
+        return self.T_dermis.value.copy(), self.T_subcutis.value.copy()
 
     def von_mises_cells(self) -> np.ndarray:
         """Cellwise von Mises stress (kPa) in mesh cell order (F is constant per P1 cell)."""

@@ -32,6 +32,7 @@ import numpy as np
 from ..core.diagnostics import StageDiagnostics, StageReport
 from ..core.errors import GeometryError, SolverError, WoundsweepError
 from ..core.schema import ExitCode, StageResult, StageStatus, start_stage
+from .closure import LineLoads
 from .profiles import line_maxima, locate_cells, profile_lines, sample_profiles
 
 if TYPE_CHECKING:
@@ -44,7 +45,6 @@ __all__ = [
     "JobOutcome",
     "NotConvergedError",
     "StageRecord",
-    "interpenetration_flag",
     "job_model",
     "run_stages",
     "solve_job",
@@ -68,6 +68,8 @@ class StageRecord(NamedTuple):
     von_mises_kPa: np.ndarray | None
     # Von Mises on the `profiles` lines, (3, PROFILE_POINTS), if converged.
     profiles_kPa: np.ndarray | None = None
+    # Closing and contact forces per length along the wound, if converged (with a wound).
+    line_loads: LineLoads | None = None
 
 
 class JobOutcome(NamedTuple):
@@ -154,12 +156,30 @@ def _finite(x: float | int | None) -> float | int | None:
     return x if isinstance(x, int) else float(x)
 
 
-def interpenetration_flag(stage: int, gap: float | None) -> int | None:
-    """The stage-3 flag: 1 if the closure gap is negative (the flanks overlap), else 0; None
-    for the other stages and for a gap that is not a number."""
-    if stage != 3 or gap is None or not math.isfinite(gap):
-        return None
-    return int(gap < 0)
+def closure_columns(model: WoundModel, stage: int) -> tuple[dict[str, Any], LineLoads | None]:
+    """The closure measures of the model's current state as store columns (NaN-free; none
+    for an unwounded patch) and the line loads along the wound (`woundsweep.physics.closure`).
+    Stage 1's wound is open by design: it gets no ``closed`` or ``interpenetrating`` flag."""
+    line = model.closure_line
+    if line is None:
+        return {}, None
+    m = line.measure(model.u)
+    cols: dict[str, Any] = {key: _finite(v) for key, v in m.columns().items()}
+    if stage >= 2:
+        cols["closed"] = int(m.closed)
+        cols["interpenetrating"] = int(m.interpenetrating)
+    closing = model.closing_forces if stage >= 2 else None
+    return cols, line.line_loads(closing, model.contact_forces())
+
+
+def _line_load_maxima(loads: LineLoads) -> dict[str, float]:
+    """Per line load its largest value (mN/mm) and where along the wound it is (y, mm)."""
+    out: dict[str, float] = {}
+    for name, vals in (("closing", loads.closing_mN_per_mm), ("contact", loads.contact_mN_per_mm)):
+        i = int(np.argmax(vals))
+        out[f"{name}_line_load_max_mN_per_mm"] = float(vals[i])
+        out[f"{name}_line_load_max_at_mm"] = float(loads.y_mm[i])
+    return out
 
 
 def run_stages(
@@ -200,7 +220,7 @@ def run_stages(
             stats = stress_summary(vm, d.volumes, d.cell_vertices, d.midpoints, samples, corners)
             if samples is not None and samples.det_F is not None:
                 min_J = min(min_J, float(samples.det_F.min()))
-        gap = out.diagnostics.get("closure_gap_mm")
+        closure, loads = closure_columns(model, k) if ok else ({}, None)
         contact = {
             key: _finite(out.diagnostics[key])
             for key in ("n_penetrating", "max_penetration_mm", "contact_force_mN")
@@ -211,14 +231,13 @@ def run_stages(
             status=s.status,
             newton_iterations=int(s.iterations),
             time_s=float(out.time_s),
-            closure_gap_mm=_finite(gap) if gap is not None else None,
-            interpenetrating=interpenetration_flag(k, gap),
             min_J=_finite(min_J),
             residual_norm=_finite(s.residual_norm),
             dofs=dofs,
             cells=cells,
             **stats,
             **contact,
+            **closure,
         )
         extra = {
             "load_increments": int(s.increments),
@@ -231,12 +250,15 @@ def run_stages(
         profiles = sample_profiles(line_cells, vm) if ok else None
         if profiles is not None:
             extra.update(line_maxima(lines, profiles))
+        if loads is not None:
+            extra.update(_line_load_maxima(loads))
         rec = StageRecord(
             result,
             {key: _finite(v) for key, v in extra.items()},
             model.displacement_input().astype(np.float32) if ok else None,
             vm[cell_input_order].astype(np.float32) if ok else None,
             profiles,
+            loads,
         )
         records.append(rec)
         if echo is not None:
@@ -253,7 +275,7 @@ def write_output(
     first_stage: int = 1,
 ) -> None:
     """Write the job's solver file atomically (records before ``first_stage`` are left out)."""
-    from ..store.solverfile import write_solver_file
+    from ..store.solverfile import CLOSURE_LINE_DATASETS, write_solver_file
     from . import compat
 
     keep = [r for r in records if r.result.stage >= first_stage]
@@ -264,14 +286,17 @@ def write_output(
         if r.displacement_mm is not None and r.von_mises_kPa is not None
     }
     lines = profile_lines(mesh.points).astype(np.float32)
-    profiles = {
-        r.result.stage: {
-            "profile_von_mises_kPa": r.profiles_kPa.astype(np.float32),
-            "profile_points_mm": lines,
-        }
-        for r in keep
-        if r.result.stage in fields and r.profiles_kPa is not None
-    }
+    profiles: dict[int, dict[str, np.ndarray]] = {}
+    for r in keep:
+        k = r.result.stage
+        if k not in fields:
+            continue
+        if r.profiles_kPa is not None:
+            profiles.setdefault(k, {})["profile_von_mises_kPa"] = r.profiles_kPa.astype(np.float32)
+            profiles[k]["profile_points_mm"] = lines
+        if r.line_loads is not None:
+            for name, data in zip(CLOSURE_LINE_DATASETS, r.line_loads):
+                profiles.setdefault(k, {})[name] = np.asarray(data, dtype=np.float32)
     attrs = {**attrs, "dolfinx_version": compat.DOLFINX_VERSION}
     write_solver_file(path, attrs, mesh, reports, fields, profiles)
 

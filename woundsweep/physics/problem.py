@@ -1,12 +1,13 @@
 """The nonlinear problem Newton solves: the wound model's residual, tangent and potential.
 
-`WoundProblem` joins the compiled forms (`WoundForms`), the flank contact (a
-`woundsweep.contact.ContactModel`, or None for an unwounded patch) and the closure zone's
-tangential tie (`woundsweep.contact.ZoneTie`) into the `woundsweep.solver.NonlinearProblem`
-protocol. The contact and tie terms are added while the penalty is on
-(``contact.k_V_kPa > 0``; the tie only once set); ``multipliers`` are the contact multipliers Newton
-carries there. The potential is not used by Newton: that it exists (every load of stages 4-6
-is dead) makes their tangent symmetric, and `tests/test_stages_contact.py` checks R = dPi/du.
+`WoundProblem` joins the compiled forms (`WoundForms`), the closure load of stages 3-6 (a
+nodal force vector, ``closure_load``), the flank contact (a `woundsweep.contact.ContactModel`,
+or None for an unwounded patch) and the closure zone's tangential tie
+(`woundsweep.contact.ZoneTie`) into the `woundsweep.solver.NonlinearProblem` protocol. The
+contact and tie terms are added while the penalty is on (``contact.k_V_kPa > 0``; the tie only
+once set); ``multipliers`` are the contact multipliers Newton carries there. The potential is
+not used by Newton: that it exists (every load is dead) makes the tangent symmetric, and
+`tests/test_stages_contact.py` checks R = dPi/du.
 
 Sparsity of the tangent matrix ``A``: while the contact is off, that of the form; while it is
 on, the form's plus the contact's coupling pattern (planned at the first tangent of a contact
@@ -62,6 +63,8 @@ class WoundProblem:
         tie: ZoneTie | None = None,
     ) -> None:
         self.domain, self.forms, self.contact, self.tie = domain, forms, contact, tie
+        # Dead nodal forces (mN, flat dofs) of the closure of stages 3-6; None: no such load.
+        self.closure_load: np.ndarray | None = None
         self.A = compat.create_matrix(forms.a_form)
         self._B = compat.create_block_matrix(forms.a_form)  # None: assemble into A itself
         self._B_nnz: float | None = None  # B's entries when A last took its structure
@@ -85,6 +88,8 @@ class WoundProblem:
 
     def residual(self, b: PETSc.Vec) -> None:
         compat.assemble_vector(b, self.forms.R_form)
+        if self.closure_load is not None:
+            add_vector(b, -self.closure_load)
         c = self._contact_on()
         if c is not None:
             u = self.solution()
@@ -177,11 +182,10 @@ class WoundProblem:
         self._pattern_version = None if c is None else c.pattern_version
 
     def energy(self) -> float | None:
-        """Total potential (mN mm) at the current state, or None while a load follows the
-        deformation (the stage-3 closure traction), when there is none."""
-        if float(self.forms.follow.value) != 0.0:
-            return None
+        """Total potential (mN mm) at the current state: every load is dead."""
         e = compat.assemble_scalar(self.forms.Pi_form)
+        if self.closure_load is not None:
+            e -= float(self.closure_load @ self.solution())
         c = self._contact_on()
         if c is not None:
             e += c.energy(self.solution())
@@ -208,14 +212,16 @@ class WoundProblem:
 
     def internal_force(self) -> np.ndarray:
         """Nodal internal forces at the current state (external loads and contact off)."""
-        saved = self.forms.loads()
+        saved, closure = self.forms.loads(), self.closure_load
         c = self.contact
         k_V = c.k_V_kPa if c is not None else 0.0
-        self.forms.set_loads(0.0, 0.0, 0.0)
+        self.forms.set_loads(0.0, 0.0)
+        self.closure_load = None
         if c is not None:
             c.k_V_kPa = 0.0
         r = self.residual_array()
         self.forms.set_loads(*saved)
+        self.closure_load = closure
         if c is not None:
             c.k_V_kPa = k_V
         return r

@@ -4,8 +4,8 @@ stages"), as recipes over the wound model's domain, forms and problem.
 1. Pre-tension: the lateral faces and the deep face stretched by the tension scaling factor.
 2. The lateral Dirichlet conditions replaced by the traction of healthy skin; the closure
    zone's wound nodes moved onto the mid-plane (Dirichlet closure).
-3. The closure's Dirichlet condition replaced by a uniform traction per deformed area.
-4-6. Contact of the flanks at penalty k_V = 1, 5, 100 GPa, the closure traction a dead load.
+3. The closure's Dirichlet condition replaced by its consistent nodal reactions, a dead load.
+4-6. Contact of the flanks at penalty k_V = 1, 5, 100 GPa, under the same closure load.
 
 docs/model.md states each stage's boundary conditions and loads and why they depart from the
 paper where they do. Every change between stages is ramped by load continuation
@@ -30,6 +30,7 @@ from ..contact import GPA_TO_KPA, ContactModel, FlankContact, ZoneTie, split_wou
 from ..core.schema import DERMIS, STAGES, SUBCUTIS, StageStatus, start_stage
 from ..solver.continuation import ContinuationResult, LoadState, continuation
 from ..solver.newton import NewtonSolver, Policy
+from .closure import ClosureLine
 from .domain import WoundDomain, dof_rows
 from .forms import WoundForms
 from .materials import HomogeneousState, JobMaterials, homogeneous_state
@@ -78,11 +79,13 @@ class WoundModel:
         self.domain = d = WoundDomain(mesh_data, zone, solver.element_degree)
         self.contact: ContactModel | None = None
         self.tie: ZoneTie | None = None
+        self.closure_line: ClosureLine | None = None
         if d.has_wound:
             flanks = split_wound_flanks(d.X, d.cell_vertices, d.wound_facets(), d.x_c)
             left, right = (d.element.sub_triangles(f) for f in flanks)
-            self.contact = FlankContact(d.X, left, right)
             self.tie = ZoneTie(d.X, d.zone_left_nodes, d.zone_right_nodes, left, d.x_c)
+            self.contact = FlankContact(d.X, left, right, tied=self.tie.pairs.ravel())
+            self.closure_line = ClosureLine(d.X, self.tie.pairs, np.unique(left), d.z_top)
         self.forms = WoundForms(d, solver.form_quadrature_degree, jit)
         self.problem = WoundProblem(d, self.forms, self.contact, self.tie)
         self.newton = NewtonSolver(self.problem, self.problem.A, solver.newton)
@@ -90,8 +93,9 @@ class WoundModel:
         self.homogeneous: dict[int, HomogeneousState] = {}
         self.results: dict[int, StageOutcome] = {}
         self.displacements: dict[int, np.ndarray] = {}
-        self.tau_kPa = 0.0
-        self.closure_force_mN: tuple[float, float] = (0.0, 0.0)
+        # The closure's nodal reactions at the end of stage 2 (flat dofs, mN): the closing
+        # load of stages 3-6. None before stage 2.
+        self.closing_forces: np.ndarray | None = None
 
     @property
     def settings(self) -> NewtonSettings:
@@ -116,10 +120,9 @@ class WoundModel:
             DERMIS: homogeneous_state(materials.dermis, materials.tsf),
             SUBCUTIS: homogeneous_state(materials.subcutis, materials.tsf),
         }
-        self.forms.set_loads(np.zeros((3, 3)), np.zeros((3, 3)), 0.0)
-        self.forms.follow.value = 1.0
-        self.tau_kPa = 0.0
-        self.closure_force_mN = (0.0, 0.0)
+        self.forms.set_loads(np.zeros((3, 3)), np.zeros((3, 3)))
+        self.problem.closure_load = None
+        self.closing_forces = None
         if self.contact is not None:
             self.contact.k_V_kPa = 0.0
         if self.tie is not None:
@@ -138,9 +141,13 @@ class WoundModel:
         """Deformed area (mm^2) of the closure-zone facets of one flank."""
         return self.domain.deformed_zone_area(side, self.u)
 
-    def closure_gap(self) -> float:
-        """Widest x-opening between the flanks in the closure zone (mm; `WoundDomain`)."""
-        return self.domain.closure_gap(self.u)
+    def contact_forces(self) -> np.ndarray | None:
+        """The contact's residual term (flat dofs, mN) at the current state, or None while
+        the penalty is off."""
+        c = self.contact
+        if c is None or c.k_V_kPa <= 0.0:
+            return None
+        return c.force_vector(self.u)
 
     def _pin_reaction(self, r: np.ndarray) -> float:
         return float(np.max(np.abs(r[self.domain.pin_rows()])))
@@ -173,10 +180,9 @@ class WoundModel:
         rows: np.ndarray,
         target: np.ndarray,
         offset: np.ndarray | None,
-        symmetric: bool = True,
     ) -> ContinuationResult:
         """Continuation from the current state to ``target`` at ``rows`` with ``offset``
-        released; ``symmetric`` unless a follower load makes the tangent non-symmetric."""
+        released (every load is dead: a symmetric tangent)."""
         u = self.u
         start = u[rows].copy()
         free_offset = None
@@ -189,7 +195,7 @@ class WoundModel:
             return LoadState(start + s * (target - start), off)
 
         scale = float(np.linalg.norm(self.problem.internal_force()))
-        policy = Policy(self.settings, symmetric=symmetric)
+        policy = Policy(self.settings, symmetric=True)
         return continuation(self.newton, rows, load, force_scale=scale, policy=policy)
 
     def _stage1(self) -> tuple[ContinuationResult, dict[str, float]]:
@@ -213,12 +219,11 @@ class WoundModel:
         t = np.concatenate(target)
         r, first = np.unique(r, return_index=True)
         t = t[first]
-        self.forms.set_loads(0.0, 0.0, 0.0)
+        self.forms.set_loads(0.0, 0.0)
         # Newton starts from the unwounded patch's solution, which meets these conditions
         # exactly: it corrects only the disturbance of the wound.
         self.u[:] = self._pretension_state().ravel()
-        res = self._ramp(r, t, None)
-        return res, {"closure_gap_mm": self.closure_gap()}
+        return self._ramp(r, t, None), {}
 
     def _pretension_state(self) -> np.ndarray:
         """Nodal displacements (n, 3) of the unwounded two-layer patch under stage 1's
@@ -245,7 +250,7 @@ class WoundModel:
         """Healthy-skin traction on the lateral faces (eqs. 15-16) and Dirichlet closure
         u_x = x_c - x on the closure zone (eq. 18)."""
         d = self.domain
-        self.forms.set_loads(self.homogeneous[DERMIS].P, self.homogeneous[SUBCUTIS].P, 0.0)
+        self.forms.set_loads(self.homogeneous[DERMIS].P, self.homogeneous[SUBCUTIS].P)
         offset = self.problem.residual_array()
         gauge = d.gauge_rows()
         u = self.u
@@ -254,11 +259,12 @@ class WoundModel:
         target = np.concatenate([u[gauge], d.x_c - d.X[d.zone_nodes, 0]])
         res = self._ramp(rows, target, offset)
         r = self.problem.residual_array()
+        # The reactions of the Dirichlet closure: u_x is held, so they act along x only.
+        self.closing_forces = np.zeros_like(r)
+        self.closing_forces[zone_rows] = r[zone_rows]
         f_left = float(r[dof_rows(d.zone_left_nodes, 0)].sum())
         f_right = float(r[dof_rows(d.zone_right_nodes, 0)].sum())
-        self.closure_force_mN = (f_left, f_right)
         diag = {
-            "closure_gap_mm": self.closure_gap(),
             "closure_force_left_mN": f_left,
             "closure_force_right_mN": f_right,
             "pin_reaction_max_mN": self._pin_reaction(r),
@@ -267,22 +273,19 @@ class WoundModel:
         return res, diag
 
     def _stage3(self) -> tuple[ContinuationResult, dict[str, float]]:
-        """Closure by a traction tau per deformed area (eqs. 17, 19): tau is the stage-2
-        closing force of both flanks over their deformed zone area."""
-        f_left, f_right = self.closure_force_mN
-        area = self.deformed_zone_area("left") + self.deformed_zone_area("right")
-        # Left flank is pulled toward +x (f_left > 0), right toward -x (f_right < 0).
-        self.tau_kPa = (f_left - f_right) / area if area > 0 else 0.0
-        self.forms.tau.value = self.tau_kPa
-        self.forms.follow.value = 1.0
+        """Closure by a load (eqs. 17, 19): the Dirichlet closure's consistent nodal reactions
+        of stage 2, applied as dead nodal forces (docs/model.md, "Closure load")."""
+        assert self.closing_forces is not None
+        self.problem.closure_load = self.closing_forces
         offset = self.problem.residual_array()
         rows = self.domain.gauge_rows()
-        # The closure traction follows the deformation (Nanson): a non-symmetric tangent.
-        res = self._ramp(rows, self.u[rows].copy(), offset, symmetric=False)
+        res = self._ramp(rows, self.u[rows].copy(), offset)
         r = self.problem.residual_array()
+        d = self.domain
+        area = self.deformed_zone_area("left") + self.deformed_zone_area("right")
+        total = float(np.abs(self.closing_forces[dof_rows(d.zone_nodes, 0)]).sum())
         diag = {
-            "closure_gap_mm": self.closure_gap(),
-            "closure_traction_kPa": self.tau_kPa,
+            "closure_traction_kPa": total / area if area > 0 else 0.0,
             "pin_reaction_max_mN": self._pin_reaction(r),
         }
         return res, diag
@@ -300,7 +303,7 @@ class WoundModel:
         c = self.contact
         if c is None:  # no wound: nothing can touch; the stage re-solves the stage-3 loads
             offset = self.problem.residual_array()
-            return self._ramp(rows, u[rows].copy(), offset, symmetric=False), {}
+            return self._ramp(rows, u[rows].copy(), offset), {}
         k_from, k_to, load, scale = self._contact_load(stage, rows)
         policy = Policy.contact(self.settings)
         # Stage 4 releases the closure and brings the penalty up from CONTACT_START_kPa at the
@@ -320,7 +323,6 @@ class WoundModel:
             k_last = k_from ** (1.0 - res.load_reached) * k_to**res.load_reached
             diag.update(self._stability(rows, k_last))
         r = self.problem.residual_array()
-        diag["closure_gap_mm"] = self.closure_gap()
         diag["pin_reaction_max_mN"] = self._pin_reaction(r)
         diag["contact_penalty_kPa"] = c.k_V_kPa
         if self.tie is not None:
@@ -354,14 +356,12 @@ class WoundModel:
         k_from = min(k_from, k_to)
         if stage == 4:
             u[:] = self.displacements[start_stage(4)]
-            # The closure traction becomes a dead load on the stage-2 area (docs/model.md).
-            self.forms.u_area.x.array[:] = self.displacements[start_stage(4)]
-            self.forms.follow.value = 0.0
+            self.problem.closure_load = self.closing_forces  # whatever stage 3 did
             if self.tie is not None:  # the closed zone is tied where stage 2 closed it
                 self.tie.set_reference(u)
         c.reset_timers()
         # Out-of-balance force released over the stage: stage 4, that of the stage-2 state
-        # under the stage-3 loads (contact off); stages 5 and 6 start from an equilibrium
+        # under the closure load (contact off; zero up to stage 2's convergence); stages 5 and 6 start from an equilibrium
         # with contact at k_from, so only its convergence residual is left to release.
         c.k_V_kPa = 0.0 if stage == 4 else k_from
         offset = self.problem.residual_array()

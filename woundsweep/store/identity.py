@@ -20,7 +20,12 @@ from typing import Any
 
 from ..config.manifest import JobRow
 from ..config.sweep import GEOMETRY_KEYS, Sweep
-from ..core.versions import MESH_LAW_VERSION, RESULT_FORMAT_VERSION, STATISTICS_VERSION
+from ..core.versions import (
+    MESH_LAW_VERSION,
+    RESULT_FORMAT_VERSION,
+    STAGES_VERSION,
+    STATISTICS_VERSION,
+)
 
 __all__ = [
     "file_sha256",
@@ -61,6 +66,7 @@ def result_fingerprint(sweep: Sweep, job: JobRow | Mapping[str, Any]) -> str:
         "format": RESULT_FORMAT_VERSION,
         "mesh_law": MESH_LAW_VERSION,
         "statistics": STATISTICS_VERSION,
+        "stages_model": STAGES_VERSION,
         "job": {k: _plain(job[k]) for k in _JOB_KEYS},
         "materials": {
             "subcutis": _plain(materials["subcutis"]),

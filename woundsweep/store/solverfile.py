@@ -4,7 +4,8 @@ Layout (docs/design.md, "Solver output"): root attributes (`ROOT_ATTRS`; ``stage
 a JSON list with one dict per reported stage: the `StageResult` fields plus diagnostic keys),
 the group ``mesh`` with `MESH_DATASETS` in the input numbering, and for every converged stage
 a group ``stage_<k>`` with `STAGE_DATASETS` (float32 per point, per cell) and, when the
-solver sampled them, `PROFILE_DATASETS` (von Mises on the lines of `woundsweep.physics.profiles`). An
+solver sampled them, `PROFILE_DATASETS` (von Mises on the lines of `woundsweep.physics.profiles`)
+and `CLOSURE_LINE_DATASETS` (line loads along the wound, `woundsweep.physics.closure`). An
 unconverged state is never written as a field.
 """
 
@@ -25,6 +26,7 @@ from ..core.fsutil import atomic_write
 from ..core.schema import UNITS, StageStatus
 
 __all__ = [
+    "CLOSURE_LINE_DATASETS",
     "MESH_DATASETS",
     "MESH_GROUP",
     "PROFILE_DATASETS",
@@ -52,6 +54,13 @@ MESH_DATASETS: Mapping[str, Any] = {"points": np.float64, "cells": np.int64, "ce
 STAGE_DATASETS = ("displacement_mm", "von_mises_kPa")
 # Optional per stage: (3, 100) von Mises on the profile lines and their (3, 100, 3) points.
 PROFILE_DATASETS = ("profile_von_mises_kPa", "profile_points_mm")
+# Optional per stage: forces per length along the wound at bin centres (closing and contact,
+# on the left flank; `woundsweep.physics.closure.LineLoads`), in this order.
+CLOSURE_LINE_DATASETS = (
+    "closure_line_y_mm",
+    "closing_force_per_length_mN_per_mm",
+    "contact_force_per_length_mN_per_mm",
+)
 _STAGE_GROUP = re.compile(r"stage_(\d+)")
 
 

@@ -43,14 +43,16 @@ __all__ = [
 ]
 
 # Per-stage quantities of the study: result fields, and from the diagnostics the stage-2
-# closure reaction of the left flank and the stage-3 traction sized from it.
+# closure reaction of the left flank, the mean closing load of stage 3 per deformed zone area
+# and the largest closing force per length along the wound.
 QUANTITIES = (
     "p99_von_mises_kPa",
     "max_von_mises_kPa",
-    "closure_gap_mm",
+    "closure_gap_max_mm",
     "contact_force_mN",
     "closure_force_left_mN",
     "closure_traction_kPa",
+    "closing_line_load_max_mN_per_mm",
 )
 
 

@@ -21,7 +21,7 @@ def draw_study(study: dict[str, Any], path: Path) -> Path:
     matplotlib.use("Agg")
     from matplotlib.figure import Figure
 
-    panels = ("p99_von_mises_kPa", "max_von_mises_kPa", "closure_gap_mm", "contact_force_mN")
+    panels = ("p99_von_mises_kPa", "max_von_mises_kPa", "closure_gap_max_mm", "contact_force_mN")
     fig = Figure(figsize=(10, 7), layout="constrained")
     axes = fig.subplots(2, 2).ravel()
     sizes = [lv["relative_size"] for lv in study["levels"]]

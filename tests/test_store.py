@@ -222,6 +222,11 @@ def test_stage_field_types_pinned() -> None:
     assert list(STAGE_FIELDS) == list(StageResult._fields[2:])
     ints = {k for k, t in STAGE_FIELDS.items() if t == pa.int64()}
     assert ints == {
-        "newton_iterations", "n_penetrating", "closed", "interpenetrating", "dofs", "cells"
+        "newton_iterations",
+        "n_penetrating",
+        "closed",
+        "interpenetrating",
+        "dofs",
+        "cells",
     }
     assert all(t == pa.float64() for k, t in STAGE_FIELDS.items() if k not in ints)

@@ -410,6 +410,27 @@ def run_dir_cases() -> list[Case]:
     ]
     for name, argv in analyze:
         cases.append(Case(name, _in_run(*argv)))
+    outputs = [  # missing output directories are created; a file in the way is refused
+        ("view-out-under-file", ["view", "RUN", "--job", "0", "--out", "RUN/sweep.yaml/x.html"], "sweep.yaml is not a directory"),
+        ("view-out-proc", ["view", "RUN", "--job", "0", "--out", "/proc/ws/x.html"], "--out"),
+        ("export-out-is-file", ["export", "RUN", "--job", "0", "--out", "RUN/sweep.yaml"], "is a file"),
+        ("export-out-under-file", ["export", "RUN", "--all", "--out", "RUN/sweep.yaml/d"], "sweep.yaml is not a directory"),
+        ("atlas-out-is-file", ["atlas", "RUN", "--out", "RUN/sweep.yaml"], "is a file"),
+        ("atlas-out-under-file", ["atlas", "RUN", "--out", "RUN/sweep.yaml/site"], "sweep.yaml is not a directory"),
+        ("mesh-out-under-file", ["mesh", "RUN", "--job", "0", "--out", "RUN/sweep.yaml/m.vtu"], "sweep.yaml is not a directory"),
+        ("view-no-result", ["view", "RUN", "--job", "0", "--out", "v.html"], "no stored result"),
+        ("export-no-result", ["export", "RUN", "--job", "0", "--out", "exp"], "no stored result"),
+        ("view-result-not-hdf5", ["view", "RUN", "--result", "RUN/sweep.yaml", "--out", "v.html"], "sweep.yaml"),
+        ("export-result-missing", ["export", "RUN", "--result", "RUN/nosuch.h5", "--out", "exp"], "nosuch.h5"),
+        ("view-neither-job-nor-result", ["view", "RUN", "--out", "v.html"], "--job N or --result"),
+        ("view-missing-all", ["view"], "RUN_DIR, --out"),
+        ("export-missing-all", ["export"], "RUN_DIR, --out"),
+        ("solve-missing-all", ["solve"], "RUN_DIR, --job"),
+        ("predict-missing-options", ["predict", "RUN", "--shape", "wedge"], "--dermal-thickness, --subcutis-thickness-factor"),
+        ("predict-not-a-run", ["predict", "RUN/..", *PREDICT_ARGS], "not a run directory"),
+    ]  # fmt: skip
+    for name, argv, word in outputs:
+        cases.append(Case(name, _in_run(*argv), contains=word))
     cases += bounded_run_cases()
     return cases
 
@@ -493,8 +514,7 @@ def bounded_run_cases() -> list[Case]:
         ("status-tab-cr-path", ["status", "RUN/a\tb\rc"]),
     ]  # fmt: skip
     for name, argv in options:
-        one = [ln for ln in argv]
-        cases.append(Case(name, _in_run(*one)))
+        cases.append(Case(name, _in_run(*argv)))
     return cases
 
 
@@ -503,6 +523,11 @@ PREDICT_BASE = {
     "--wound-width-factor": "0.3", "--mesh-size-factor": "0.3", "--orientation": "0",
     "--wound-depth-factor": "0.3",
 }  # fmt: skip
+
+
+PREDICT_ARGS = ["--shape", "wedge", "--skin-type", "stiff"] + [
+    a for k, v in PREDICT_BASE.items() for a in (k, v)
+]
 
 
 def _predict(opt: str | None, value: str, prep: Callable[[Path], None] | None = None):  # type: ignore[no-untyped-def]

@@ -12,6 +12,7 @@ import yaml
 from cli_run import DEMO, PAPER
 
 from woundsweep.config.manifest import expand
+from woundsweep.config.solver import SolverSettings
 from woundsweep.config.sweep import MANIFEST_COLUMNS, load_sweep, parse_sweep
 from woundsweep.core.errors import SweepError
 
@@ -139,7 +140,9 @@ def test_settings_defaults_are_table_2() -> None:
     assert stiff.c_kPa == 42.6 and stiff.tsf == 1.05 and stiff.mu_kPa == (35.6, 11.8, 11.8)
     assert s.materials.to_dict()["subcutis"] == {"C10_kPa": 0.4, "C20_kPa": 1.4, "K_kPa": 50.0}
     assert s.stages.contact_penalty_GPa == (1.0, 5.0, 100.0)
-    assert s.solver.element_degree == 1 and s.solver.newton.max_iterations == 60
+    # The demo runs the paper's element; the default element stays P1.
+    assert s.solver.element_degree == load_sweep(PAPER).solver.element_degree == 2
+    assert SolverSettings().element_degree == 1 and s.solver.newton.max_iterations == 60
     # The paper file spells out the same values as the defaults.
     assert load_sweep(PAPER).materials == s.materials
     assert load_sweep(PAPER).stages == s.stages

@@ -95,12 +95,15 @@ def test_fingerprint_covers_what_determines_a_result(empty_run: Path) -> None:
 
     run = load_run(empty_run)
     job = run.manifest[run.manifest["skin_type"] == "stiff"].iloc[0]
-    doc = {"grid": dict(run.sweep.grid), "shapes": dict(run.sweep.shapes)}
+    solver = {"element_degree": run.sweep.solver.element_degree}
+    doc = {"grid": dict(run.sweep.grid), "shapes": dict(run.sweep.shapes), "solver": solver}
     base = result_fingerprint(parse_sweep(doc), job)
     assert len(base) == 64 and base == result_fingerprint(run.sweep, job)
 
     def fp(section: str, value: dict) -> str:
-        return result_fingerprint(parse_sweep({**doc, section: value}), job)
+        return result_fingerprint(
+            parse_sweep({**doc, section: {**doc.get(section, {}), **value}}), job
+        )
 
     changed = [
         fp("materials", {"skin_types": {"stiff": {"c_kPa": 42.7}, "soft": {}}}),

@@ -125,6 +125,17 @@ def test_view_renders_and_switches_stage(driver, site, tmp_path: Path) -> None:
     )
     assert len(options) == 6 and not any(d for _, d in options)
     assert driver.execute_script("return document.getElementById('stage').value") == "5"
+    # The default colour scale ends at the stage's p99, the cells above it in the top band.
+    p99 = driver.execute_script(
+        "var d=JSON.parse(document.getElementById('wsdata').textContent); return d.stages[5].p99_von_mises_kPa;"
+    )
+    bar = driver.execute_script("return document.getElementById('plot').data[0].colorbar;")
+    assert driver.execute_script(
+        "return document.getElementById('plot').data[0].cmax;"
+    ) == pytest.approx(1.15 * p99, rel=1e-6)
+    assert bar["ticktext"][-2].startswith("p99 ") and bar["ticktext"][-1].startswith("> p99")
+    # "colour scale to the maximum": the stage's surface maximum is the top.
+    driver.execute_script("document.getElementById('fullrange').click();")
     cmax = {}
     for k in (1, 2):
         driver.execute_script(
@@ -137,15 +148,30 @@ def test_view_renders_and_switches_stage(driver, site, tmp_path: Path) -> None:
         cmax[k] = driver.execute_script("return document.getElementById('plot').data[0].cmax;")
     # The fixture's von Mises is 10 kPa * stage + the same field: the surface max moves by 10.
     assert cmax[2] - cmax[1] == pytest.approx(10.0, abs=1e-3)
-    # "colour scale up to p99" uses the stage's p99 from the table.
-    driver.execute_script("document.getElementById('clip').click();")
-    _wait(driver, f"return document.getElementById('plot').data[0].cmax < {cmax[2] - 1e-6};")
-    data = driver.execute_script(
-        "var d=JSON.parse(document.getElementById('wsdata').textContent); return d.stages[1].p99_von_mises_kPa;"
+    # The deformation scale moves the surface: at 0 it is the reference mesh.
+    x1 = driver.execute_script("return document.getElementById('plot').data[0].x[0];")
+    driver.execute_script(
+        "var s=document.getElementById('scale'); s.value='0'; s.dispatchEvent(new Event('input'));"
     )
-    assert driver.execute_script(
-        "return document.getElementById('plot').data[0].cmax;"
-    ) == pytest.approx(data)
+    x0 = driver.execute_script("return document.getElementById('plot').data[0].x[0];")
+    ref = driver.execute_script(
+        "var d=JSON.parse(document.getElementById('wsdata').textContent);"
+        "var s=atob(d.x), u=new Uint8Array(s.length); for (var i=0;i<s.length;i++) u[i]=s.charCodeAt(i);"
+        "return new Float32Array(u.buffer)[0];"
+    )
+    assert x0 == pytest.approx(ref, abs=1e-6) and x1 != pytest.approx(x0, abs=1e-9)
+    # The cut adds the section's triangles and keeps the surface's y >= mid half.
+    n_full = driver.execute_script("return document.getElementById('plot').data[0].i.length;")
+    driver.execute_script("document.getElementById('cut').click();")
+    n_cut = driver.execute_script("return document.getElementById('plot').data[0].i.length;")
+    data = driver.execute_script(
+        "return JSON.parse(document.getElementById('wsdata').textContent).cut.n_triangles;"
+    )
+    assert data > 0 and n_cut != n_full and n_cut > data
+    assert (
+        driver.execute_script("return document.getElementById('lines').layout.title.text;")
+        == "no profile lines stored"
+    )
     names = driver.execute_script("return document.getElementById('plot').data.map(t => t.name);")
     assert names == ["surface", "closure zone", "max von Mises"]
     assert console_errors(driver) == []

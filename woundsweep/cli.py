@@ -74,7 +74,51 @@ COMMANDS: dict[str, tuple[str, str]] = {
 }
 
 
+def missing_required(cmd: click.Command, ctx: click.Context, args: list[str]) -> list[str]:
+    """Every required option or argument of ``cmd`` that ``args`` leaves out (in the order
+    of ``--help``), so that one message names them all; [] when the arguments do not
+    parse (click then reports that) or ask for help."""
+    if any(a in ctx.help_option_names for a in args):
+        return []
+    sub = click.Context(cmd, info_name=cmd.name, parent=ctx, resilient_parsing=True)
+    try:
+        opts, _, _ = cmd.make_parser(sub).parse_args(args=list(args))
+    except click.ClickException:
+        return []
+    names = []
+    unset = getattr(click.core, "UNSET", None)  # click >= 8.3 marks absent values with it
+    for param in cmd.get_params(sub):
+        value = opts.get(param.name)
+        if not param.required or not (value is None or value is unset or value == ()):
+            continue
+        if param.resolve_envvar_value(sub) is not None:
+            continue
+        if isinstance(param, click.Option):
+            names.append(max(param.opts, key=len))
+        else:
+            names.append(param.make_metavar(sub) if _METAVAR_TAKES_CTX else param.make_metavar())
+    return names
+
+
+try:  # click >= 8.2 passes the context to make_metavar
+    import inspect
+
+    _METAVAR_TAKES_CTX = "ctx" in inspect.signature(click.Argument.make_metavar).parameters
+except (TypeError, ValueError):  # pragma: no cover
+    _METAVAR_TAKES_CTX = False
+
+
 class LazyGroup(click.Group):
+    def resolve_command(
+        self, ctx: click.Context, args: list[str]
+    ) -> tuple[str | None, click.Command | None, list[str]]:
+        name, cmd, rest = super().resolve_command(ctx, args)
+        if cmd is not None:
+            missing = missing_required(cmd, ctx, rest)
+            if len(missing) > 1:
+                raise click.UsageError(f"{name}: missing {', '.join(missing)} (see --help)")
+        return name, cmd, rest
+
     def list_commands(self, ctx: click.Context) -> list[str]:
         return list(COMMANDS)
 

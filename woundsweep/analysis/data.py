@@ -43,6 +43,16 @@ def sweep_settings(run_dir: Path) -> tuple[dict[str, Any], dict[str, float]]:
     return analysis, {name: float(p.c_kPa) for name, p in materials.skin_types.items()}
 
 
+def run_element_degree(run_dir: str | Path) -> int | None:
+    """The element degree of a run directory's sweep (None without one)."""
+    from ..config.manifest import load_run
+
+    rd = Path(run_dir)
+    if (rd / "sweep.yaml").is_file() and (rd / "manifest.parquet").is_file():
+        return int(load_run(rd).sweep.solver.element_degree)
+    return None
+
+
 def skin_codes(run_dir: str | Path) -> dict[str, float]:
     """Skin type name -> its Fung ``c`` in kPa: an ordered, physical code for the model."""
     return sweep_settings(Path(run_dir))[1]

@@ -29,6 +29,7 @@ __all__ = [
     "confusion",
     "importance_bars",
     "max_locations",
+    "plain_log",
     "roc_curves",
     "save",
     "stiff_vs_soft",
@@ -47,6 +48,32 @@ FIGURE_STEMS = {
     "mesh": ("mesh_sensitivity",),  # only with matched geometries (`mesh_sensitivity`)
     "surrogate": ("surrogate_test", "sobol"),
 }
+
+
+def plain_log(ax: Any, which: str = "xy") -> None:
+    """Log-scaled axes labelled with plain numbers (2, 5, 10, 20, not 2x10^0): ticks at 1-2-3-5
+    or 1-2-5 per decade over a short range, fewer over a long one, no minor labels. Call it after
+    plotting (the ticks follow the data's range)."""
+    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
+
+    for name in which:
+        axis = ax.xaxis if name == "x" else ax.yaxis
+        (ax.set_xscale if name == "x" else ax.set_yscale)("log")
+        lo, hi = sorted(axis.get_view_interval())
+        decades = np.log10(hi / lo) if lo > 0 and hi > lo else 1.0
+        if decades <= 0.6:
+            subs: tuple[float, ...] = tuple(range(1, 10))
+        elif decades <= 1.2:
+            subs = (1.0, 2.0, 3.0, 5.0)
+        elif decades <= 2.0:
+            subs = (1.0, 2.0, 5.0)
+        elif decades <= 3.2:
+            subs = (1.0, 3.0)
+        else:
+            subs = (1.0,)
+        axis.set_major_locator(LogLocator(base=10.0, subs=subs, numticks=12))
+        axis.set_major_formatter(FuncFormatter(lambda v, _pos: f"{v:g}"))
+        axis.set_minor_formatter(NullFormatter())
 
 
 def save(fig: Figure, out_dir: Path, stem: str) -> list[Path]:
@@ -158,7 +185,7 @@ def stress_distribution(stress: np.ndarray, stage: np.ndarray, edges: np.ndarray
     if edges is not None:
         for e in edges[1:-1]:
             ax.axvline(e, color="grey", lw=0.6, ls="--")
-    ax.set_xscale("log")
+    plain_log(ax, "x")
     ax.set_xlabel("maximal stress: volume-weighted p99 von Mises (kPa)")
     ax.set_ylabel("rows")
     ax.legend(fontsize=8)
@@ -178,8 +205,7 @@ def stiff_vs_soft(pairs: pd.DataFrame, summary: dict[str, Any]) -> Figure:
             lo = float(min(p["soft_kPa"].min(), p["stiff_kPa"].min()))
             hi = float(max(p["soft_kPa"].max(), p["stiff_kPa"].max()))
             ax.plot([lo, hi], [lo, hi], "k-", lw=0.8)
-            ax.set_xscale("log")
-            ax.set_yscale("log")
+            plain_log(ax)
         st = summary.get(shape)
         if st:
             pval = st["sign_test_p"]
@@ -286,8 +312,7 @@ def surrogate_test(
         p, np.exp(observed), s=6, color="tab:blue", zorder=3, rasterized=True, label="test rows"
     )
     ax.plot([p.min(), p.max()], [p.min(), p.max()], "k-", lw=0.8)
-    ax.set_xscale("log")
-    ax.set_yscale("log")
+    plain_log(ax)
     ax.set_xlabel("surrogate estimate: p99 von Mises (kPa)")
     ax.set_ylabel("simulated p99 von Mises (kPa)")
     ax.legend(fontsize=8)

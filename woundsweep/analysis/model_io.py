@@ -127,7 +127,12 @@ def resolve_model_path(path: str | Path, scheme: str | None = None) -> Path:
         for s in [scheme] if scheme else ["geometry", "random"]:
             if (d / f"model_{s}.json").is_file():
                 return d / f"model_{s}.json"
-    raise AnalysisError(f"{p}: no trained model found (run `woundsweep analyze` first)")
+    if not (p / "manifest.parquet").is_file() and not p.name == "analysis":
+        raise AnalysisError(
+            f"{p}: not a run directory (no manifest.parquet) and no model_<split>.json in it;"
+            " give a run directory after `woundsweep analyze`, its analysis/ or a model file"
+        )
+    raise AnalysisError(f"{p}: no trained model found (run `woundsweep analyze {p}` first)")
 
 
 def load_model(path: str | Path, scheme: str | None = None) -> LoadedModel:

@@ -19,9 +19,17 @@ import numpy as np
 
 from .. import __version__
 from ..config.analysis import resolve_settings
+from ..config.solver import element_name
 from ..core.errors import AnalysisError
 from ..core.fsutil import atomic_write_bytes
-from .data import drop_orphans, encode_features, load_results, select_rows, sweep_settings
+from .data import (
+    drop_orphans,
+    encode_features,
+    load_results,
+    run_element_degree,
+    select_rows,
+    sweep_settings,
+)
 from .failure import fit_failure
 from .fitting import fit_scheme
 from .mesh_sensitivity import matched_ratios, mesh_sensitivity
@@ -38,7 +46,12 @@ from .settings import (
 )
 from .trained_on import trained_on
 
-__all__ = ["AnalysisOutput", "run_analysis"]
+__all__ = ["AnalysisOutput", "analysis_steps", "run_analysis"]
+
+
+def analysis_steps(n_schemes: int) -> int:
+    """How many times `run_analysis` calls ``echo``: once before each of its steps."""
+    return n_schemes + 6
 
 
 def _surrogate(
@@ -95,7 +108,9 @@ def run_analysis(
     for s in schemes:
         if s not in SCHEMES:
             raise AnalysisError(f"unknown split scheme {s!r} (expected one of {SCHEMES})")
+    say("reading the results...")
     sweep_analysis, skins = sweep_settings(rd)
+    degree = run_element_degree(rd)
     settings = resolve_settings(sweep_analysis, overrides)
     q = settings.quantiles
     results, orphans = drop_orphans(load_results(rd), rd)
@@ -124,6 +139,8 @@ def run_analysis(
         "xgboost_version": xgb.__version__,
         "stress": STRESS,
         "stress_units": "kPa",
+        "element_degree": degree,
+        "element": element_name(degree) if degree is not None else "unknown (no sweep)",
         "features": list(FEATURES),
         "importance_groups": {k: list(v) for k, v in IMPORTANCE_GROUPS.items()},
         "settings": dataclasses.asdict(settings),
@@ -163,6 +180,7 @@ def run_analysis(
     metrics_path = out / "metrics.json"
     atomic_write_bytes(metrics_path, json_bytes(metrics))
     files.append(metrics_path)
+    say("writing metrics.json and report.md...")
     report_path = out / "report.md"
     write_report(report_path, metrics, [p.name for p in figs])
     files.append(report_path)

@@ -58,6 +58,8 @@ def render_report(metrics: dict[str, Any], figures: Sequence[str]) -> str:
     lines = [
         "# woundsweep analysis report",
         "",
+        f"Element: {metrics.get('element', 'unknown')}; every number below is of this element.",
+        "",
         f"Maximal stress = `{metrics['stress']}` (kPa). Rows: {rows['store_rows']} in the store "
         f"({rows['jobs']} jobs), {rows['converged_rows']} converged, {rows['used_rows']} used "
         f"(converged, stress > 0). {q} quantile classes: chance is accuracy {1 / q:.3f}, AUC 0.5.",

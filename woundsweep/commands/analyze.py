@@ -105,21 +105,45 @@ def cmd(
     figures and report.md. Settings: defaults, then the sweep's `analysis` section, then
     --param, then the dedicated flags.
     """
+    from tqdm import tqdm
+
     from ..analysis import SCHEMES, run_analysis
+    from ..analysis.pipeline import analysis_steps
 
     overrides: dict[str, Any] = _param(params)
     for key, value in (("quantiles", quantiles), ("seed", seed), ("nthread", nthread)):
         if value is not None:
             overrides[key] = value
     schemes = SCHEMES if split == "both" else (split,)
-    result = run_analysis(
-        run_dir,
-        overrides,
-        schemes,
-        echo=click.echo,
-        drop_interpenetrating=drop_interpenetrating,
-        keep_reopened=keep_reopened,
-    )
+    # On a terminal only (disable=None): an error stays the one line on stderr.
+    bar = tqdm(total=analysis_steps(len(schemes)), desc="analyze", unit="step", disable=None)
+
+    started: list[str] = []
+
+    def step(line: str) -> None:  # a step begins: the one before it is done
+        if bar.disable:  # not a terminal (a log file): the step as a line
+            click.echo(line)
+            return
+        if started:
+            bar.update(1)
+        started.append(line)
+        bar.set_description(line.rstrip("."))
+
+    try:
+        result = run_analysis(
+            run_dir,
+            overrides,
+            schemes,
+            echo=step,
+            drop_interpenetrating=drop_interpenetrating,
+            keep_reopened=keep_reopened,
+        )
+        bar.update(bar.total - bar.n)
+    except BaseException:
+        bar.leave = False  # the error line replaces the bar
+        raise
+    finally:
+        bar.close()
     for line in summary_lines(result.metrics):
         click.echo(line)
     click.echo(f"wrote {len(result.files)} files to {result.out_dir} (see report.md)")

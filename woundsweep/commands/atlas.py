@@ -52,7 +52,7 @@ def _warn_if_stale(run_dir: Path, results: Any) -> None:
 @click.option(
     "--out",
     type=click.Path(file_okay=False, path_type=Path),
-    help="Directory of the site (default RUN_DIR/atlas).",
+    help="Directory of the site (default RUN_DIR/atlas; created if missing).",
 )
 @click.option(
     "--views",
@@ -70,12 +70,18 @@ def cmd(run_dir: Path, out: Path | None, views: str) -> None:
     sizes are printed at the end.
     """
     from ..config.manifest import load_run
+    from ..core.errors import WoundsweepError
+    from ..core.fsutil import check_output_dir
     from ..store.reader import read_results
     from ..viz.atlas import build_atlas, parse_views
 
     run = load_run(run_dir)
     out = out or run.run_dir / "atlas"
     _check_out(run.run_dir, out)
+    try:
+        check_output_dir(out)
+    except ValueError as err:
+        raise WoundsweepError(f"--out {err}") from None
     chosen = parse_views(views, [int(j) for j in run.manifest["job_index"]])
     n_files = len(list((run.run_dir / "results").glob("job-*.parquet")))
     click.echo(f"reading and validating {n_files} result files ...", err=True)

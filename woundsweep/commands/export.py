@@ -1,4 +1,5 @@
-"""``woundsweep export RUN_DIR (--job N | --all) --out DIR``: ParaView series per job."""
+"""``woundsweep export RUN_DIR (--job N | --all | --result FILE.h5) --out DIR``: ParaView
+files per job (`woundsweep.viz.export`)."""
 
 from __future__ import annotations
 
@@ -21,31 +22,47 @@ def _notes_line(info: dict) -> str:
 @click.option("--job", "job", type=int, help="Export this job index.")
 @click.option("--all", "all_", is_flag=True, help="Export every stored job.")
 @click.option(
+    "--result",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Export the HDF5 file `woundsweep solve --out` wrote (a job of RUN_DIR).",
+)
+@click.option(
     "--out",
     required=True,
     type=click.Path(file_okay=False, path_type=Path),
-    help="Directory for the series (one job-<N>/ folder per job).",
+    help="Directory for the files (one job-<N>/ folder per job; created if missing).",
 )
-def cmd(run_dir: Path, job: int | None, all_: bool, out: Path) -> None:
-    """Write ParaView files: per job a PVD series with one VTU per stored stage.
+@click.option("--xdmf", is_flag=True, help="Also write the volume series as XDMF + HDF5.")
+def cmd(
+    run_dir: Path, job: int | None, all_: bool, result: Path | None, out: Path, xdmf: bool
+) -> None:
+    """Write ParaView files: per job a PVD series over the stored stages, each stage a
+    multiblock of the volume (tetrahedra) and the exterior surface (triangles).
 
-    Each VTU holds the reference mesh (tetrahedra and exterior triangles), the point data
-    displacement_mm and the cell data von_mises_kPa, cell_tag, facet_tag and closure_zone
-    (Warp By Vector on displacement_mm shows the deformed state). Which stages exist is
-    decided by `run --fields`; a stage without a field is named with the reason.
+    Point data displacement_mm (Warp By Vector shows the deformed state); cell data with
+    units: von_mises_kPa, cauchy_stress_kPa, principal_stress_kPa, green_lagrange_strain,
+    det_F, cell_tag, and on the surface facet_tag, closure_zone, normal_traction_kPa and
+    contact_pressure_kPa. Which stages exist is decided by `run --fields`; a stage without a
+    field is named with the reason. A job without a stored result is read from
+    RUN_DIR/solve/job_<N>.h5 when `woundsweep solve` wrote it.
     """
     from ..config.manifest import load_run
+    from ..core.errors import WoundsweepError
+    from ..core.fsutil import check_output_dir
     from ..store.reader import read_results
     from ..viz.export import export_job
-    from ..viz.jobdata import load_job
+    from ..viz.jobdata import load_job, open_job
 
-    if (job is not None) == all_:
-        raise click.UsageError("give exactly one of --job N or --all")
+    if all_ == (job is not None or result is not None):
+        raise click.UsageError("give exactly one of --job N (or --result FILE.h5) or --all")
+    try:
+        check_output_dir(out)
+    except ValueError as err:
+        raise WoundsweepError(f"--out {err}") from None
     run = load_run(run_dir)
-    if job is not None:
-        row = run.job(job)
-        rows = read_results(run.run_dir, [str(row["job_id"])])
-        info = export_job(load_job(run, row, rows), out)
+    if not all_:
+        info = export_job(open_job(run_dir, job, result=result), out, xdmf)
+        job = info["job_index"]
         stages = [s["stage"] for s in info["stages"] if s["file"]]
         where = out / f"job-{job}" / info["series"]
         click.echo(f"job {job}: stages {stages or 'none'} -> {where}")
@@ -59,7 +76,7 @@ def cmd(run_dir: Path, job: int | None, all_: bool, out: Path) -> None:
     n_stages, cache = 0, {}
     by_job = dict(tuple(results.groupby("job_id")))
     for row in tqdm(man.to_dict("records"), desc="export", unit="job", leave=False):
-        info = export_job(load_job(run, row, by_job[row["job_id"]], cache), out)
+        info = export_job(load_job(run, row, by_job[row["job_id"]], cache), out, xdmf)
         n_stages += sum(1 for s in info["stages"] if s["file"])
         reasons.update(s["not_exported"] for s in info["stages"] if s["not_exported"])
     pending = len(run.manifest) - len(man)

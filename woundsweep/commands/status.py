@@ -9,6 +9,7 @@ from typing import Any
 import click
 
 from ..config.manifest import load_run
+from ..config.solver import element_name
 from ..core.schema import FailureClass
 from ..execution.summary import summarize
 from ..store.reader import scan_results, scan_store
@@ -97,7 +98,10 @@ def cmd(run_dir: Path, as_json: bool) -> None:
     run = load_run(run_dir)
     scan = scan_store(run.run_dir)
     s = summarize(run.manifest, scan_results(scan), scan)
+    degree = run.sweep.solver.element_degree
     if as_json:
-        click.echo(json.dumps({"run_dir": str(run.run_dir), **s}, indent=2))
+        element = {"element_degree": degree, "element": element_name(degree)}
+        click.echo(json.dumps({"run_dir": str(run.run_dir), **element, **s}, indent=2))
     else:
+        click.echo(f"sweep {run.sweep.name}: element {element_name(degree)}")
         click.echo(format_status(s))

@@ -6,7 +6,7 @@ import dataclasses
 from collections.abc import Mapping
 from typing import Any
 
-__all__ = ["DEGREES", "NewtonSettings", "SolverSettings"]
+__all__ = ["DEGREES", "NewtonSettings", "SolverSettings", "element_name"]
 
 # The displacement element: Lagrange tetrahedra of degree 1 (P1) or 2 (P2).
 DEGREES = (1, 2)
@@ -61,3 +61,10 @@ class SolverSettings:
             int(d.get("quadrature_degree", cls.quadrature_degree)),
             NewtonSettings(**newton),
         )
+
+
+def element_name(degree: int) -> str:
+    """The element as reports name it: ``P1 (linear tetrahedra)``, ``P2 (quadratic ...)``;
+    P1 is marked a preview (docs/model.md: its p99 moves with the mesh)."""
+    kind = {1: "linear tetrahedra, a preview", 2: "quadratic tetrahedra"}.get(int(degree), "")
+    return f"P{int(degree)} ({kind})" if kind else f"P{int(degree)}"

@@ -10,7 +10,13 @@ import tempfile
 from collections.abc import Callable
 from pathlib import Path
 
-__all__ = ["atomic_write", "atomic_write_bytes", "check_output_file", "read_small_text"]
+__all__ = [
+    "atomic_write",
+    "atomic_write_bytes",
+    "check_output_dir",
+    "check_output_file",
+    "read_small_text",
+]
 
 
 def _umask() -> int:
@@ -122,6 +128,25 @@ def check_output_file(path: str | Path) -> None:
     if not parent.is_dir():
         raise ValueError(f"{p}: {parent} is not a directory")
     try:  # a real write: permission bits do not show a read-only mount, /proc, or root
+        with tempfile.TemporaryFile(prefix=".woundsweep-check.", dir=parent):
+            pass
+    except OSError as err:
+        raise ValueError(f"{p}: cannot write in {parent} ({err.strerror})") from None
+
+
+def check_output_dir(path: str | Path) -> None:
+    """``ValueError`` (one line) unless ``path`` can be an output directory: it is one, or
+    it is missing (it is created, with its missing parents) below a writable directory; a
+    path or parent that is a file is named."""
+    p = Path(os.path.abspath(path))
+    if p.exists() and not p.is_dir():
+        raise ValueError(f"{p}: is a file, not a directory")
+    parent = p
+    while not parent.exists():
+        parent = parent.parent
+    if not parent.is_dir():
+        raise ValueError(f"{p}: {parent} is not a directory")
+    try:
         with tempfile.TemporaryFile(prefix=".woundsweep-check.", dir=parent):
             pass
     except OSError as err:

@@ -29,6 +29,7 @@ import numpy as np
 import pandas as pd
 
 from ..config.manifest import Run
+from ..config.solver import element_name
 from ..config.sweep import GEOMETRY_KEYS
 from ..core.errors import StoreError
 from ..core.schema import STAGES, StageStatus
@@ -118,29 +119,35 @@ def _index_table(manifest: pd.DataFrame, results: pd.DataFrame, views: set[int])
         index="job_index", columns="stage", values="p99_von_mises_kPa", aggfunc="first"
     )
     jobs = results.drop_duplicates("job_index").set_index("job_index")
-    converged = (results["status"] == StageStatus.CONVERGED).groupby(results["job_index"]).sum()
-    cols = [("job_index", "job", "num")]
+    ok = results["status"] == StageStatus.CONVERGED
+    converged = ok.groupby(results["job_index"]).sum()
+    # Converged stages whose sutured zone has reopened (docs/model.md, "Closure measures").
+    closed = results["closed"] if "closed" in results else pd.Series(np.nan, index=results.index)
+    reopened = (
+        (ok & (pd.to_numeric(closed, errors="coerce") == 0)).groupby(results["job_index"]).sum()
+    )
+    # The job, its outcome and the p99 per stage first, so that they fit 1,280 px; then the
+    # parameters (the job column stays in view when the table scrolls sideways).
+    cols = [("job_index", "job", "num"), ("failure_class", "failure_class", "str")]
+    cols += [(f"p99_s{k}", f"p99 kPa s{k}", "num") for k in STAGES]
+    cols += [("failed_stage", "failed_stage", "num"), ("converged_stages", "converged", "num")]
+    cols += [("reopened_stages", "reopened", "num")]
     cols += [
         (c, c, "num" if pd.api.types.is_numeric_dtype(manifest[c]) else "str")
         for c in _INDEX_PARAMS
     ]
-    cols += [("failure_class", "failure_class", "str"), ("failed_stage", "failed_stage", "num")]
-    cols += [("converged_stages", "converged_stages", "num")]
-    cols += [(f"p99_s{k}", f"p99_von_mises_kPa_stage_{k}", "num") for k in STAGES]
     cols += [("view", "3D", "str")]
     rows = []
     for job in manifest.sort_values("job_index").itertuples(index=False):
         j = int(job.job_index)
         stored = j in jobs.index
-        row: list[Any] = [j]
-        for c in _INDEX_PARAMS:
-            v = getattr(job, c)
-            row.append(_cell(v))
-        row.append(str(jobs.at[j, "failure_class"]) if stored else "pending")
-        row.append(_cell(jobs.at[j, "failed_stage"]) if stored else None)
-        row.append(int(converged.at[j]) if stored else None)
+        row: list[Any] = [j, str(jobs.at[j, "failure_class"]) if stored else "pending"]
         for k in STAGES:
             row.append(_cell(p99.at[j, k]) if j in p99.index and k in p99.columns else None)
+        row.append(_cell(jobs.at[j, "failed_stage"]) if stored else None)
+        row.append(int(converged.at[j]) if stored else None)
+        row.append(int(reopened.at[j]) if stored else None)
+        row += [_cell(getattr(job, c)) for c in _INDEX_PARAMS]
         row.append("yes" if j in views else "")
         rows.append(row)
     return {"columns": [{"key": k, "label": h, "type": t} for k, h, t in cols], "rows": rows}
@@ -187,9 +194,11 @@ def _analysis(run_dir: Path, out: Path) -> int:
     for p in figures + sorted(src.glob("metrics.json")):
         shutil.copyfile(p, dst / p.name)
         total += p.stat().st_size
-    body = '<nav><a href="../index.html">index</a></nav>\n<h1>Analysis</h1>\n'
+    body = '<nav><a href="../index.html">index</a></nav>\n'
     report = src / "report.md"
-    if report.exists():
+    if not report.exists():
+        body += "<h1>Analysis</h1>\n"
+    else:
         from markdown_it import MarkdownIt
 
         body += MarkdownIt("commonmark").enable("table").render(report.read_text("utf-8"))
@@ -245,6 +254,7 @@ def build_atlas(
     }
     cache: dict[Any, Any] = {}
     drawn: set[int] = set()
+    element = element_name(run.sweep.solver.element_degree)
     head = '<script src="../assets/plotly.min.js"></script>\n'
     for n, job in enumerate(man.to_dict("records"), 1):
         j = int(job["job_index"])
@@ -263,8 +273,9 @@ def build_atlas(
             jf = load_job(run, job, rows, cache)
         footer = "<h2>Log</h2>\n" + log_html(run.run_dir / "logs" / f"job-{job['job_id']}.log")
         body = job_body(
-            job, rows, jf, view_note=note, header=_nav(j, prev, nxt, has_analysis), footer=footer
-        )
+            job, rows, jf, view_note=note, header=_nav(j, prev, nxt, has_analysis), footer=footer,
+            element=element,
+        )  # fmt: skip
         if jf is not None:
             body += '<script src="../assets/viewer.js"></script>\n'
         size = _write(
@@ -284,7 +295,7 @@ def build_atlas(
     data = _index_table(run.manifest, results, drawn)
     body = (
         f"<h1>woundsweep atlas <small>{escape(run.run_dir.name)} &middot; "
-        f"{len(order)} jobs</small></h1>\n"
+        f"{len(order)} jobs &middot; element {escape(element)}</small></h1>\n"
         + (
             '<nav><a href="analysis/index.html">analysis: report and figures</a></nav>\n'
             if has_analysis
@@ -294,7 +305,8 @@ def build_atlas(
         "numbers: 2, &gt;1, &lt;=0.5 or 1..2). Units are in the column names. "
         f"Built {escape(time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime()))} from {escape(str(run.run_dir))}; "
         f"{fmt(len(results.drop_duplicates('job_index')))} jobs stored.</p>\n"
-        '<div class="pager" id="pager"></div>\n<table id="index"></table>\n'
+        '<div class="pager" id="pager"></div>\n'
+        '<div class="tablewrap"><table id="index"></table></div>\n'
         + json_script("atlasdata", data)
         + '<script src="assets/index.js"></script>\n'
     )

@@ -35,6 +35,7 @@ STAGE_COLUMNS: tuple[tuple[str, str], ...] = (
     ("max_location_y_mm", "max_y_mm"),
     ("max_location_z_mm", "max_z_mm"),
     ("closure_gap_max_mm", "closure_gap_max_mm"),
+    ("closed", "closed"),
     ("min_J", "min_J"),
     ("contact_force_mN", "contact_force_mN"),
     ("max_penetration_mm", "max_penetration_mm"),

@@ -18,13 +18,29 @@ import numpy as np
 import pandas as pd
 
 from ..config.manifest import JobRow, Run
+from ..config.paper import Materials
 from ..core.errors import StoreError
-from ..core.schema import StageStatus
+from ..core.schema import PROFILE_LINES, FailureClass, StageStatus
 from ..store.reader import store_file_names
-from ..store.solverfile import MESH_GROUP, STAGE_DATASETS, stage_group
+from ..store.solverfile import (
+    CLOSURE_LINE_DATASETS,
+    MESH_GROUP,
+    PROFILE_DATASETS,
+    STAGE_DATASETS,
+    stage_group,
+)
 from .surface import closure_zone_facets
 
-__all__ = ["JobFields", "StageNote", "load_job", "open_job", "records", "stage_notes"]
+__all__ = [
+    "JobFields",
+    "StageNote",
+    "load_job",
+    "load_solver_file",
+    "open_job",
+    "solve_output",
+    "records",
+    "stage_notes",
+]
 
 
 class StageNote(NamedTuple):
@@ -49,6 +65,12 @@ class JobFields(NamedTuple):
     zone: np.ndarray  # (k,) bool: the facet is in the closure zone
     fields: dict[int, tuple[np.ndarray, np.ndarray]]  # stage -> (displacement_mm, von_mises_kPa)
     notes: list[StageNote]
+    materials: Materials | None = None  # the run's materials (the derived stresses need them)
+    profiles: dict[int, dict[str, np.ndarray]] = {}  # stage -> line name -> (points, 3) + values
+    # stage -> `CLOSURE_LINE_DATASETS` name -> (k,): the line loads along the wound
+    closure_lines: dict[int, dict[str, np.ndarray]] = {}
+    source: str = ""  # the file the fields came from
+    element_degree: int = 0  # the run's element (1: P1, 2: P2; 0 unknown)
 
 
 def records(rows: pd.DataFrame | list[dict[str, Any]]) -> list[dict[str, Any]]:
@@ -173,6 +195,20 @@ def load_job(
         stored = [int(k) for k in json.loads(attrs.get("stored_stages", "[]"))]
         mesh_file = str(attrs.get("mesh_file", mesh_file) or mesh_file)
         _plain_names(job, fields_file, mesh_file)
+    source = f"fields/{fields_file}"
+    return _assemble(run, job, rows, groups, stored, mesh_file, source, cache)
+
+
+def _assemble(
+    run: Run,
+    job: JobRow,
+    rows: list[dict[str, Any]],
+    groups: dict[str, Any],
+    stored: list[int],
+    mesh_file: str,
+    source: str,
+    cache: dict[Any, Any] | None,
+) -> JobFields:
     key = (str(job["geometry_id"]), mesh_file)
     if MESH_GROUP not in groups and cache is not None and key in cache:
         points, cells, cell_tags, facets, facet_tags, in_zone = cache[key]
@@ -183,15 +219,19 @@ def load_job(
         if MESH_GROUP not in groups and cache is not None:
             cache.clear()  # jobs come grouped by geometry: one mesh at a time
             cache[key] = (points, cells, cell_tags, facets, facet_tags, in_zone)
-    fields = {}
+    fields, profiles, closure_lines = {}, {}, {}
     for k in stored:
         g = groups.get(stage_group(k), {})
         if not set(STAGE_DATASETS) <= set(g):
-            raise StoreError(f"fields/{fields_file}: stage {k} lacks {list(STAGE_DATASETS)}")
+            raise StoreError(f"{source}: stage {k} lacks {list(STAGE_DATASETS)}")
         u, vm = (np.asarray(g[name]) for name in STAGE_DATASETS)
         if u.shape != points.shape or vm.shape != (len(cells),):
-            raise StoreError(f"fields/{fields_file}: stage {k} arrays do not fit the mesh")
+            raise StoreError(f"{source}: stage {k} arrays do not fit the mesh")
         fields[k] = (u, vm)
+        if set(PROFILE_DATASETS) <= set(g):
+            profiles[k] = _profiles(*(np.asarray(g[name]) for name in PROFILE_DATASETS))
+        if set(CLOSURE_LINE_DATASETS) <= set(g):
+            closure_lines[k] = {name: np.asarray(g[name], float) for name in CLOSURE_LINE_DATASETS}
     return JobFields(
         job=job,
         rows=rows,
@@ -203,15 +243,76 @@ def load_job(
         zone=in_zone,
         fields=fields,
         notes=stage_notes(rows, set(fields)),
+        materials=run.sweep.materials,
+        element_degree=int(run.sweep.solver.element_degree),
+        profiles=profiles,
+        closure_lines=closure_lines,
+        source=source,
     )
 
 
-def open_job(run_dir: str | Path, job_index: int, cache: dict[Any, Any] | None = None) -> JobFields:
-    """`load_job` for one job of a run directory, with its validated rows."""
+def _profiles(values: np.ndarray, points: np.ndarray) -> dict[str, dict[str, np.ndarray]]:
+    """A stage's stored profile lines by name: `PROFILE_LINES` first, then any further lines
+    the file holds (named ``line_<i>``)."""
+    names = [*PROFILE_LINES, *(f"line_{i}" for i in range(len(PROFILE_LINES), len(values)))]
+    return {
+        names[i]: {"points_mm": np.asarray(points[i], float), "von_mises_kPa": values[i]}
+        for i in range(min(len(values), len(points)))
+    }
+
+
+def load_solver_file(run: Run, job: JobRow | None, path: str | Path) -> JobFields:
+    """A job from the HDF5 file ``woundsweep solve`` wrote (``path``); its job is the file's
+    ``job_index`` (checked against ``job`` when given, and against the run's manifest)."""
+    path = Path(path)
+    attrs, groups = _read_h5(path)
+    if "stage_results" not in attrs or "job_id" not in attrs:
+        raise StoreError(f"{path}: not a solver file of `woundsweep solve`")
+    file_job = run.job(int(attrs.get("job_index", -1)))
+    if file_job["job_id"] != attrs["job_id"]:
+        raise StoreError(f"{path}: holds job {attrs['job_id']!r}, not one of {run.run_dir}")
+    if job is not None and job["job_id"] != attrs["job_id"]:
+        raise StoreError(f"{path}: holds job {file_job['job_index']}, not job {job['job_index']}")
+    try:
+        rows = records(json.loads(attrs["stage_results"]))
+    except (ValueError, TypeError, KeyError) as err:
+        raise StoreError(f"{path}: bad stage_results ({err})") from None
+    ok = all(r.get("status") == StageStatus.CONVERGED for r in rows)
+    cls = FailureClass.CONVERGED if ok else FailureClass.NOT_CONVERGED
+    for r in rows:
+        r.update(failure_class=str(cls), fields="all", fields_file=path.name, mesh_file="")
+    stored = sorted(int(g.split("_")[1]) for g in groups if g.startswith("stage_"))
+    return _assemble(run, file_job, rows, groups, stored, "", str(path), None)
+
+
+def solve_output(run_dir: str | Path, job_index: int) -> Path:
+    """Where ``woundsweep solve`` writes a job without ``--out``."""
+    return Path(run_dir) / "solve" / f"job_{int(job_index)}.h5"
+
+
+def open_job(
+    run_dir: str | Path,
+    job_index: int | None,
+    cache: dict[Any, Any] | None = None,
+    result: str | Path | None = None,
+) -> JobFields:
+    """One job of a run directory: from ``result`` (a file `woundsweep solve` wrote) when
+    given, else its stored result (`load_job`), else ``RUN_DIR/solve/job_<N>.h5``."""
     from ..config.manifest import load_run
     from ..store.reader import read_results
 
     run = load_run(run_dir)
-    job = run.job(job_index)
+    job = run.job(job_index) if job_index is not None else None
+    if result is not None:
+        return load_solver_file(run, job, result)
+    if job is None:
+        raise StoreError("give --job N or --result FILE.h5")
     rows = read_results(run.run_dir, [str(job["job_id"])])
+    if len(rows) == 0 and solve_output(run.run_dir, job_index).is_file():
+        return load_solver_file(run, job, solve_output(run.run_dir, job_index))
+    if len(rows) == 0:
+        raise StoreError(
+            f"job {job_index} has no stored result yet (run `woundsweep run`, or `woundsweep "
+            f"solve` to {solve_output(run.run_dir, job_index)})"
+        )
     return load_job(run, job, rows, cache)

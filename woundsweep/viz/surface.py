@@ -14,7 +14,15 @@ import numpy as np
 from ..contact.geometry import owning_cells
 from ..core.schema import WOUND_ZONE
 
-__all__ = ["ExteriorSurface", "closure_zone_facets", "max_cell_point", "surface_of", "zone_outline"]
+__all__ = [
+    "ExteriorSurface",
+    "PlaneSlice",
+    "closure_zone_facets",
+    "max_cell_point",
+    "plane_slice",
+    "surface_of",
+    "zone_outline",
+]
 
 
 def closure_zone_facets(facet_tags: np.ndarray) -> np.ndarray:
@@ -58,3 +66,57 @@ def max_cell_point(
     i = int(np.nanargmax(vm))
     ref = points[cells[i]].mean(axis=0)
     return i, ref, ref + np.asarray(u, float)[cells[i]].mean(axis=0)
+
+
+class PlaneSlice(NamedTuple):
+    """The cut of a tetrahedral mesh by a plane: its points on mesh edges and triangles."""
+
+    edge_a: np.ndarray  # (e,) mesh node at one end of each cut edge
+    edge_b: np.ndarray  # (e,) the other end
+    edge_t: np.ndarray  # (e,) the point is (1 - t) x_a + t x_b
+    triangles: np.ndarray  # (k, 3) indices into the edges
+    owner: np.ndarray  # (k,) the tetrahedron each triangle lies in
+
+
+def plane_slice(points: np.ndarray, cells: np.ndarray, axis: int, value: float) -> PlaneSlice:
+    """The cut of the tetrahedra by the plane ``x[axis] = value`` (reference configuration):
+    a triangle where one vertex is alone on its side, two where the sides split two-two."""
+    d = np.asarray(points, float)[:, axis] - value
+    side = d[cells] > 0
+    n_pos = side.sum(axis=1)
+    edges: dict[tuple[int, int], int] = {}
+    ea: list[int] = []
+    eb: list[int] = []
+    tris: list[list[int]] = []
+    owner: list[int] = []
+
+    def edge(a: int, b: int) -> int:
+        key = (a, b) if a < b else (b, a)
+        if key not in edges:
+            edges[key] = len(ea)
+            ea.append(key[0])
+            eb.append(key[1])
+        return edges[key]
+
+    for c in np.flatnonzero((n_pos > 0) & (n_pos < 4)):
+        v = [int(x) for x in cells[c]]
+        pos = [x for x, s in zip(v, side[c]) if s]
+        neg = [x for x, s in zip(v, side[c]) if not s]
+        if len(pos) == 2:  # a quadrilateral p0-n0, p0-n1, p1-n1, p1-n0
+            q = [
+                edge(pos[0], neg[0]),
+                edge(pos[0], neg[1]),
+                edge(pos[1], neg[1]),
+                edge(pos[1], neg[0]),
+            ]
+            tris += [[q[0], q[1], q[2]], [q[0], q[2], q[3]]]
+            owner += [int(c), int(c)]
+        else:
+            lone, rest = (pos[0], neg) if len(pos) == 1 else (neg[0], pos)
+            tris.append([edge(lone, r) for r in rest])
+            owner.append(int(c))
+    a, b = np.asarray(ea, np.int64), np.asarray(eb, np.int64)
+    t = d[a] / (d[a] - d[b]) if len(a) else np.zeros(0)
+    return PlaneSlice(
+        a, b, t, np.asarray(tris, np.int64).reshape(-1, 3), np.asarray(owner, np.int64)
+    )

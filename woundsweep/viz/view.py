@@ -17,11 +17,12 @@ from typing import Any
 import numpy as np
 
 from ..config.manifest import JobRow
+from ..config.solver import element_name
 from ..config.sweep import MANIFEST_COLUMNS
 from ..core.schema import STAGE_NAMES
 from .html import JOB_COLUMNS, STAGE_COLUMNS, asset, json_script, page, plotly_js, table
 from .jobdata import JobFields, StageNote, records
-from .surface import max_cell_point, surface_of, zone_outline
+from .surface import max_cell_point, plane_slice, surface_of, zone_outline
 
 __all__ = ["job_body", "stage_rows", "view_data", "view_page"]
 
@@ -38,10 +39,43 @@ def _num(v: Any) -> float | None:
     return f if math.isfinite(f) else None
 
 
+def _closure_lines(jf: JobFields, k: int) -> dict[str, Any] | None:
+    """A stage's line loads along the wound (mN/mm at y, mm), or None where not stored."""
+    lines = jf.closure_lines.get(k)
+    if not lines:
+        return None
+    return {name: [_num(v) for v in values] for name, values in lines.items()}
+
+
+def _profile_lines(jf: JobFields, k: int) -> list[dict[str, Any]]:
+    """A stage's stored profile lines: name, running length from the first point (mm), von
+    Mises (kPa, null where a point is outside the mesh)."""
+    out = []
+    for name, line in jf.profiles.get(k, {}).items():
+        pts = np.asarray(line["points_mm"], float)
+        s = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(pts, axis=0), axis=1))]
+        out.append(
+            {
+                "name": name,
+                "s_mm": [round(float(v), 5) for v in s],
+                "von_mises_kPa": [_num(v) for v in np.asarray(line["von_mises_kPa"], float)],
+                "start_mm": [round(float(c), 4) for c in pts[0]],
+                "end_mm": [round(float(c), 4) for c in pts[-1]],
+            }
+        )
+    return out
+
+
 def view_data(jf: JobFields) -> dict[str, Any]:
-    """The viewer's data: the surface once, then per requested stage its fields or a reason."""
+    """The viewer's data: the surface and the mid-section cut once, then per requested stage
+    its fields (surface, cut, profile lines) or a reason."""
     s = surface_of(jf.points, jf.cells, jf.facets, jf.zone)
     ref = jf.points[s.nodes]
+    lo, hi = jf.points.min(axis=0), jf.points.max(axis=0)
+    y_mid = 0.5 * float(lo[1] + hi[1])
+    cut = plane_slice(jf.points, jf.cells, 1, y_mid)
+    cut_nodes, cut_edges = np.unique(np.r_[cut.edge_a, cut.edge_b], return_inverse=True)
+    n_edges = len(cut.edge_a)
     p99 = {int(r["stage"]): _num(r.get("p99_von_mises_kPa")) for r in jf.rows}
     stages = []
     for note in jf.notes:
@@ -61,6 +95,10 @@ def view_data(jf: JobFields) -> dict[str, Any]:
             entry.update(
                 u=_b64(np.asarray(u)[s.nodes], "<f4"),
                 vm=_b64(tri_vm, "<f4"),
+                cut_u=_b64(np.asarray(u)[cut_nodes], "<f4"),
+                cut_vm=_b64(np.asarray(vm, np.float64)[cut.owner], "<f4"),
+                lines=_profile_lines(jf, k),
+                closure=_closure_lines(jf, k),
                 surface_max_kPa=float(np.nanmax(tri_vm)),
                 max={
                     "value_kPa": float(vm[cell]),
@@ -80,6 +118,18 @@ def view_data(jf: JobFields) -> dict[str, Any]:
         "z": _b64(ref[:, 2], "<f4"),
         "tri": _b64(s.triangles, "<i4"),
         "outline": _b64(zone_outline(s.triangles, s.zone), "<i4"),
+        "element": element_name(int(jf.element_degree)) if jf.element_degree else "",
+        "cut": {
+            "y_mm": y_mid,
+            "x": _b64(jf.points[cut_nodes, 0], "<f4"),
+            "y": _b64(jf.points[cut_nodes, 1], "<f4"),
+            "z": _b64(jf.points[cut_nodes, 2], "<f4"),
+            "a": _b64(cut_edges[:n_edges], "<i4"),
+            "b": _b64(cut_edges[n_edges:], "<i4"),
+            "t": _b64(cut.edge_t, "<f4"),
+            "tri": _b64(cut.triangles, "<i4"),
+            "n_triangles": int(len(cut.triangles)),
+        },
         "stages": stages,
     }
 
@@ -111,21 +161,41 @@ def job_body(
     view_note: str = "",
     header: str = "",
     footer: str = "",
+    element: str = "",
 ) -> str:
-    """A job's HTML: title, the 3D view (with ``jf``) or ``view_note``, stages, parameters."""
+    """A job's HTML: title (with the run's ``element``), the 3D view and the profile lines
+    (with ``jf``) or ``view_note``, stages, parameters."""
     idx, fc = int(job["job_index"]), rows[0]["failure_class"] if rows else "not run"
-    title = f"<h1>job {idx} <small>{escape(str(job['job_id']))} &middot; {escape(str(fc))}</small></h1>\n"
+    if jf is not None and jf.element_degree:
+        element = element_name(jf.element_degree)
+    elem = f" &middot; element {escape(element)}" if element else ""
+    title = (
+        f"<h1>job {idx} <small>{escape(str(job['job_id']))} &middot; {escape(str(fc))}"
+        f"{elem}</small></h1>\n"
+    )
     notes = jf.notes if jf is not None else None
     if jf is not None:
         view = (
             '<div class="controls"><label>stage <select id="stage"></select></label>'
-            '<label><input type="checkbox" id="clip"> colour scale up to p99</label>'
+            '<label>deformation &times; <input type="number" id="scale" value="1" min="0" '
+            'max="20" step="0.5"></label>'
+            '<label><input type="checkbox" id="cut"> cut at the wound\'s mid-section</label>'
+            '<label><input type="checkbox" id="fullrange"> colour scale to the maximum</label>'
             '<label><input type="checkbox" id="seethrough"> see-through surface</label>'
-            '<span id="note"></span></div>\n<div id="plot"></div>\n'
-            '<p class="legend">Deformed exterior surface (displacement at scale 1), each '
-            "triangle coloured by the von Mises stress of the tetrahedron it bounds; black "
-            "outline: the closure zone; red diamond: the cell of the largest von Mises "
-            "(deformed midpoint). Lengths in mm.</p>\n" + json_script("wsdata", view_data(jf))
+            '<span id="note"></span></div>\n'
+            '<div class="views"><div id="plot"></div>'
+            '<div class="side"><div id="lines"></div><div id="closure"></div></div></div>\n'
+            '<p class="legend">Left: the deformed exterior surface (displacement times the '
+            "deformation scale), each triangle coloured by the von Mises stress of the "
+            "tetrahedron it bounds; the colour scale ends at the stage's p99 and cells above "
+            "it are magenta (the colour bar's top band); the cut shows the half y &ge; the "
+            "wound's mid-section and the cut face; black outline: the closure zone; red "
+            "diamond: the cell of the largest von Mises (deformed midpoint). Right: von Mises "
+            "along the stored profile lines (reference configuration); below it the closing "
+            "force per unit length along the wound (the load that holds the sutured zone shut: "
+            "where the sutures work hardest) and the flanks' contact force per unit length. "
+            "Lengths in mm, stresses in kPa, line loads in mN/mm.</p>\n"
+            + json_script("wsdata", view_data(jf))
         )
     else:
         view = f'<p class="noview">{escape(view_note)}</p>\n'
@@ -134,8 +204,9 @@ def job_body(
         + title
         + view
         + "<h2>Stages</h2>\n"
+        + '<div class="tablewrap">'
         + table([h for _, h in STAGE_COLUMNS], stage_rows(rows, notes), "stages")
-        + "<h2>Parameters</h2>\n"
+        + "</div>\n<h2>Parameters</h2>\n"
         + _param_table(job, rows)
         + footer
     )

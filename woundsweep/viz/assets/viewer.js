@@ -1,11 +1,15 @@
 // woundsweep 3D view: reads the JSON in #wsdata (see woundsweep/viz/view.py) and draws the
-// deformed surface with plotly.js (Mesh3d, one colour per triangle), the closure zone's
-// outline and the maximum's marker; the stage selector redraws with Plotly.react.
+// deformed surface with plotly.js (Mesh3d, one colour per triangle), optionally cut at the
+// wound's mid-section, the closure zone's outline, the maximum's marker, and beside it the
+// von Mises along the stored profile lines; the controls redraw with Plotly.react.
 (function () {
   "use strict";
   var el = document.getElementById("wsdata");
   if (!el || typeof Plotly === "undefined") { return; }
   var D = JSON.parse(el.textContent);
+  var OVER = "#ff00ff";  // cells above the colour scale's top (p99)
+  var VIRIDIS = ["#440154", "#482878", "#3e4989", "#31688e", "#26828e", "#1f9e89",
+                 "#35b779", "#6ece58", "#b5de2b", "#fde725"];
 
   function bytes(b64) {
     var s = atob(b64), u = new Uint8Array(s.length);
@@ -16,11 +20,20 @@
   function i32(b64) { return new Int32Array(bytes(b64)); }
 
   var X = f32(D.x), Y = f32(D.y), Z = f32(D.z), T = i32(D.tri), E = i32(D.outline);
-  var nT = D.n_triangles, I = new Int32Array(nT), J = new Int32Array(nT), K = new Int32Array(nT);
-  for (var t = 0; t < nT; t++) { I[t] = T[3 * t]; J[t] = T[3 * t + 1]; K[t] = T[3 * t + 2]; }
+  var C = D.cut, CX = f32(C.x), CY = f32(C.y), CZ = f32(C.z);
+  var CA = i32(C.a), CB = i32(C.b), CT = f32(C.t), CTRI = i32(C.tri);
+  var nT = D.n_triangles;
+  // Surface triangles on the kept side of the cut (reference centroid y >= the cut's y).
+  var kept = [];
+  for (var t = 0; t < nT; t++) {
+    var yc = (Y[T[3 * t]] + Y[T[3 * t + 1]] + Y[T[3 * t + 2]]) / 3;
+    if (yc >= C.y_mm) { kept.push(t); }
+  }
 
   var select = document.getElementById("stage");
-  var clip = document.getElementById("clip");
+  var scaleBox = document.getElementById("scale");
+  var cutBox = document.getElementById("cut");
+  var fullrange = document.getElementById("fullrange");
   var seethrough = document.getElementById("seethrough");
   var note = document.getElementById("note");
   var last = -1;
@@ -33,16 +46,23 @@
     if (s.stored) { last = n; }
   });
 
-  function deformed(s) {
-    var u = f32(s.u), n = X.length;
-    var x = new Float32Array(n), y = new Float32Array(n), z = new Float32Array(n);
-    for (var i = 0; i < n; i++) { x[i] = X[i] + u[3 * i]; y[i] = Y[i] + u[3 * i + 1]; z[i] = Z[i] + u[3 * i + 2]; }
+  function scale() {
+    var v = Number(scaleBox.value);
+    return isFinite(v) && v >= 0 ? v : 1;
+  }
+
+  function deformed(X0, Y0, Z0, u, k) {
+    var n = X0.length, x = new Float32Array(n), y = new Float32Array(n), z = new Float32Array(n);
+    for (var i = 0; i < n; i++) {
+      x[i] = X0[i] + k * u[3 * i]; y[i] = Y0[i] + k * u[3 * i + 1]; z[i] = Z0[i] + k * u[3 * i + 2];
+    }
     return [x, y, z];
   }
 
-  function outline(p) {
+  function outline(p, cut) {
     var x = [], y = [], z = [];
     for (var e = 0; e < E.length; e += 2) {
+      if (cut && Y[E[e]] < C.y_mm && Y[E[e + 1]] < C.y_mm) { continue; }
       x.push(p[0][E[e]], p[0][E[e + 1]], null);
       y.push(p[1][E[e]], p[1][E[e + 1]], null);
       z.push(p[2][E[e]], p[2][E[e + 1]], null);
@@ -51,37 +71,127 @@
              line: { color: "black", width: 5 }, hoverinfo: "name" };
   }
 
+  // The colour scale: Viridis up to `top`, then a magenta band for the values above it.
+  function colours(top, max) {
+    if (!(max > top)) {
+      return { cmax: top, scale: VIRIDIS.map(function (c, i) { return [i / (VIRIDIS.length - 1), c]; }),
+               ticks: null };
+    }
+    var cmax = top * 1.15, f = top / cmax, scale = [];
+    VIRIDIS.forEach(function (c, i) { scale.push([f * i / (VIRIDIS.length - 1), c]); });
+    scale.push([f, OVER], [1, OVER]);
+    var vals = [], text = [], step = niceStep(top / 5);
+    for (var v = 0; v <= top * 0.93; v += step) { vals.push(v); text.push(String(+v.toPrecision(4))); }
+    vals.push(top, 0.5 * (top + cmax));
+    text.push("p99 " + top.toPrecision(3), "> p99 (max " + max.toPrecision(3) + ")");
+    return { cmax: cmax, scale: scale, ticks: [vals, text] };
+  }
+
+  function niceStep(x) {
+    var p = Math.pow(10, Math.floor(Math.log10(x))), m = x / p;
+    return (m < 1.5 ? 1 : m < 3.5 ? 2 : m < 7.5 ? 5 : 10) * p;
+  }
+
   function draw() {
     var s = D.stages[Number(select.value)];
     if (!s || !s.stored) { return; }
-    var p = deformed(s), vm = f32(s.vm), m = s.max;
-    var top = clip.checked && s.p99_von_mises_kPa ? s.p99_von_mises_kPa : s.surface_max_kPa;
+    var k = scale(), u = f32(s.u), vm = f32(s.vm), m = s.max;
+    var p = deformed(X, Y, Z, u, k);
+    var top = !fullrange.checked && s.p99_von_mises_kPa ? s.p99_von_mises_kPa : s.surface_max_kPa;
+    var I = [], J = [], K = [], V = [], px = Array.from(p[0]), py = Array.from(p[1]), pz = Array.from(p[2]);
+    var tris = cutBox.checked ? kept : null, n = tris ? tris.length : nT;
+    for (var q = 0; q < n; q++) {
+      var t = tris ? tris[q] : q;
+      I.push(T[3 * t]); J.push(T[3 * t + 1]); K.push(T[3 * t + 2]); V.push(vm[t]);
+    }
+    if (cutBox.checked) {  // the cut face: points on mesh edges, moved with their edge
+      var cu = f32(s.cut_u), cvm = f32(s.cut_vm), base = px.length, ne = CA.length;
+      for (var e = 0; e < ne; e++) {
+        var a = CA[e], b = CB[e], w = CT[e];
+        px.push((1 - w) * (CX[a] + k * cu[3 * a]) + w * (CX[b] + k * cu[3 * b]));
+        py.push((1 - w) * (CY[a] + k * cu[3 * a + 1]) + w * (CY[b] + k * cu[3 * b + 1]));
+        pz.push((1 - w) * (CZ[a] + k * cu[3 * a + 2]) + w * (CZ[b] + k * cu[3 * b + 2]));
+      }
+      for (var c = 0; c < C.n_triangles; c++) {
+        I.push(base + CTRI[3 * c]); J.push(base + CTRI[3 * c + 1]); K.push(base + CTRI[3 * c + 2]);
+        V.push(cvm[c]);
+      }
+    }
+    var col = colours(top, s.surface_max_kPa);
+    var shown = V.map(function (v) { return Math.min(v, col.cmax); });
+    var bar = { title: { text: "von Mises (kPa)" } };
+    if (col.ticks) { bar.tickvals = col.ticks[0]; bar.ticktext = col.ticks[1]; }
     var surface = {
-      type: "mesh3d", x: p[0], y: p[1], z: p[2], i: I, j: J, k: K,
-      intensity: vm, intensitymode: "cell", colorscale: "Viridis", cmin: 0, cmax: top,
-      colorbar: { title: { text: "von Mises (kPa)" } }, flatshading: true,
+      type: "mesh3d", x: px, y: py, z: pz, i: I, j: J, k: K,
+      intensity: shown, intensitymode: "cell", colorscale: col.scale, cmin: 0, cmax: col.cmax,
+      colorbar: bar, flatshading: true, customdata: V,
       opacity: seethrough.checked ? 0.35 : 1, name: "surface",
-      hovertemplate: "von Mises %{intensity:.4g} kPa<extra></extra>"
+      hovertemplate: "von Mises %{customdata:.4g} kPa<extra></extra>"
     };
+    var mx = m.reference_mm.map(function (c, i) { return c + k * (m.deformed_mm[i] - c); });
     var marker = {
       type: "scatter3d", mode: "markers+text", name: "max von Mises",
-      x: [m.deformed_mm[0]], y: [m.deformed_mm[1]], z: [m.deformed_mm[2]],
+      x: [mx[0]], y: [mx[1]], z: [mx[2]],
       text: ["max " + m.value_kPa.toPrecision(4) + " kPa"], textposition: "top center",
       marker: { symbol: "diamond", size: 7, color: "red" }, hoverinfo: "text"
     };
     var layout = {
       margin: { l: 0, r: 0, t: 30, b: 0 }, showlegend: true, legend: { x: 0, y: 1 },
-      title: { text: "job " + D.job_index + ", " + s.label, font: { size: 14 } },
+      title: { text: "job " + D.job_index + ", " + s.label + (D.element ? " (" + D.element + ")" : ""),
+               font: { size: 14 }, x: 0.01, xanchor: "left" },
       uirevision: "keep-camera",
       scene: { aspectmode: "data", xaxis: { title: { text: "x (mm)" } },
                yaxis: { title: { text: "y (mm)" } }, zaxis: { title: { text: "z (mm)" } },
                camera: { eye: { x: 1.2, y: -1.6, z: 1.1 } } }
     };
     var traces = [surface, marker];
-    if (E.length) { traces.splice(1, 0, outline(p)); }
+    if (E.length) { traces.splice(1, 0, outline(p, cutBox.checked)); }
     note.textContent = "max " + m.value_kPa.toPrecision(4) + " kPa at (" +
       m.reference_mm.map(function (c) { return c.toFixed(3); }).join(", ") + ") mm (reference)";
     Plotly.react("plot", traces, layout, { responsive: true, displaylogo: false });
+    drawLines(s, top);
+  }
+
+  function drawLines(s, top) {
+    var lines = s.lines || [];
+    var traces = lines.map(function (l) {
+      return { type: "scatter", mode: "lines", name: l.name.replace(/_/g, " "), x: l.s_mm,
+               y: l.von_mises_kPa, connectgaps: false,
+               hovertemplate: l.name + ": %{y:.4g} kPa at %{x:.3g} mm<extra></extra>" };
+    });
+    var layout = {
+      margin: { l: 55, r: 10, t: 30, b: 45 },
+      title: { text: lines.length ? "von Mises along the profile lines" : "no profile lines stored",
+               font: { size: 14 } },
+      xaxis: { title: { text: "distance along the line (mm)" } },
+      yaxis: { title: { text: "von Mises (kPa)" }, rangemode: "tozero" },
+      legend: { orientation: "h", y: -0.2 },
+      shapes: top ? [{ type: "line", xref: "paper", x0: 0, x1: 1, y0: top, y1: top,
+                       line: { color: "#999", dash: "dot", width: 1 } }] : []
+    };
+    Plotly.react("lines", traces, layout, { responsive: true, displayModeBar: false });
+    drawClosure(s);
+  }
+
+  function drawClosure(s) {
+    var c = s.closure;
+    var traces = c ? [
+      { type: "scatter", mode: "lines+markers", name: "closing force", x: c.closure_line_y_mm,
+        y: c.closing_force_per_length_mN_per_mm, line: { shape: "hvh" },
+        hovertemplate: "closing: %{y:.4g} mN/mm at y = %{x:.3g} mm<extra></extra>" },
+      { type: "scatter", mode: "lines+markers", name: "contact force", x: c.closure_line_y_mm,
+        y: c.contact_force_per_length_mN_per_mm, line: { shape: "hvh" },
+        hovertemplate: "contact: %{y:.4g} mN/mm at y = %{x:.3g} mm<extra></extra>" }
+    ] : [];
+    var layout = {
+      margin: { l: 55, r: 10, t: 30, b: 45 },
+      title: { text: c ? "forces per length along the wound" : "no line loads stored",
+               font: { size: 14 } },
+      xaxis: { title: { text: "y along the wound (mm)" } },
+      yaxis: { title: { text: "mN/mm" }, rangemode: "tozero" },
+      legend: { orientation: "h", y: -0.25 }
+    };
+    Plotly.react("closure", traces, layout, { responsive: true, displayModeBar: false });
   }
 
   if (last < 0) {
@@ -90,8 +200,7 @@
     return;
   }
   select.value = String(last);
-  select.addEventListener("change", draw);
-  clip.addEventListener("change", draw);
-  seethrough.addEventListener("change", draw);
+  [select, cutBox, fullrange, seethrough].forEach(function (b) { b.addEventListener("change", draw); });
+  scaleBox.addEventListener("input", draw);
   draw();
 })();

@@ -199,7 +199,7 @@ def bounded_sweep_cases() -> list[Case]:
         "stages.contact_penalty_GPa": [[100, 5, 1], [1, 1, 5], [1, 5, 1e9], [1e-9, 5, 100]],
         "solver.max_iterations": [0, 10**6],
         "solver.max_stage_iterations": [0, 10**9],
-        "solver.quadrature_degree": [0, 1000, 5],
+        "solver.quadrature_degree": [0, 1000, 7],  # P2 takes up to 6
         "solver.load_steps": [0],
         "solver.max_load_cuts": [1000],
         "solver.gamma_min": [5, 1e-300],

@@ -154,6 +154,73 @@ def sweep_cases() -> list[Case]:
     for key, values in settings.items():
         for i, v in enumerate(values):
             cases.append(Case(f"{key}-{i}", _sweep(_set(key, v)), watch="new"))
+    cases += bounded_sweep_cases()
+    return cases
+
+
+def _alias_bomb(levels: int) -> str:
+    """A sweep whose name is ``levels`` nested aliases of ten each (10**levels strings)."""
+    lines = ['a0: &a0 "lol"']
+    for k in range(1, levels + 1):
+        lines.append(f"a{k}: &a{k} [" + ", ".join([f"*a{k - 1}"] * 10) + "]")
+    return "\n".join(lines) + f"\nname: *a{levels}\n"
+
+
+def bounded_sweep_cases() -> list[Case]:
+    """Values of the right type outside their physical or numerical range, duplicate keys,
+    aliases, and text where a name belongs."""
+    text = yaml.safe_dump(DEMO)
+    structure = {
+        "yaml-duplicate-top-key": text + yaml.safe_dump({"grid": DEMO["grid"]}),
+        "yaml-duplicate-nested-key": text.replace("grid:\n", "grid:\n  orientation_deg: [45]\n", 1),
+        "yaml-alias-bomb-9": _alias_bomb(9),
+        "yaml-alias-bomb-6": _alias_bomb(6),
+        "yaml-alias-rules": "r: &r wound_width_mm > 100\n"
+        + text.replace("exclude:", "exclude: [" + ", ".join(["*r"] * 5000) + "]\nold_exclude:", 1),
+        "yaml-alias-grid": text.replace("grid:", "grid: &g", 1) + "shapes2: *g\n",
+        "rule-400-digits": yaml.safe_dump({**DEMO, "exclude": ["wound_width_mm > " + "9" * 400]}),
+        "rule-1e999": yaml.safe_dump({**DEMO, "exclude": ["wound_width_mm > 1e999"]}),
+        "rule-too-many": yaml.safe_dump({**DEMO, "exclude": ["wound_width_mm > 100"] * 1001}),
+        "rule-too-long": yaml.safe_dump({**DEMO, "exclude": ["wound_width_mm > 1" + " " * 1000]}),
+    }
+    cases = [Case(f"sweep-{k}", _sweep(text=v), watch="new") for k, v in structure.items()]
+    full = {"c_kPa": 21.3, "mu_kPa": [17.8, 5.9, 5.9], "lambda11_kPa": 1.0,
+            "lambda_other_kPa": 1.0, "K_kPa": 250, "tsf": 1.1}  # fmt: skip
+    values = {
+        "name": [[1], {"a": 1}, 5, "x" * 201, "two\nlines"],
+        "description": [5, ["a"], "x" * 10_001],
+        "materials.subcutis.K_kPa": [1e300, 1e-300],
+        "materials.subcutis.C10_kPa": [1e-300],
+        "materials.skin_types.stiff.tsf": [0.5, 1e6, 0.99],
+        "materials.skin_types.stiff.c_kPa": [1e300, 1e-3],
+        "materials.skin_types.stiff.mu_kPa": [[1e9, 11.8, 11.8]],
+        "materials.skin_types.stiff.K_kPa": [1e300],
+        "materials.skin_types.newskin": [{**full, "K_kPa": 1e-300}, {**full, "tsf": 3}],
+        "stages.contact_penalty_GPa": [[100, 5, 1], [1, 1, 5], [1, 5, 1e9], [1e-9, 5, 100]],
+        "solver.max_iterations": [0, 10**6],
+        "solver.max_stage_iterations": [0, 10**9],
+        "solver.quadrature_degree": [0, 1000, 7],  # P2 takes up to 6
+        "solver.load_steps": [0],
+        "solver.max_load_cuts": [1000],
+        "solver.gamma_min": [5, 1e-300],
+        "solver.rtol": [0.9],
+        "solver.residual_growth": [0.5],
+        "solver.divergence_factor": [0.5],
+        "solver.max_strain_step": [1e9],
+        "analysis.seed": [2**70, 2**32],
+        "analysis.quantiles": [1, 1000],
+        "analysis.n_estimators": [0, 10**9],
+        "analysis.max_depth": [1000],
+        "analysis.nthread": [0],
+        "analysis.learning_rate": [5],
+        "analysis.sobol_samples": [100, 2**30],
+        "analysis.train_fraction": [0.99],
+        "grid.patch_size_factor": [[1e6]],
+        "grid.dermal_thickness_mm": [[1e300]],
+    }
+    for key, vals in values.items():
+        for i, v in enumerate(vals):
+            cases.append(Case(f"bounded-{key}-{i}", _sweep(_set(key, v)), watch="new"))
     return cases
 
 
@@ -364,6 +431,90 @@ def run_dir_cases() -> list[Case]:
     ]  # fmt: skip
     for name, argv, word in outputs:
         cases.append(Case(name, _in_run(*argv), contains=word))
+    cases += bounded_run_cases()
+    return cases
+
+
+def _edit_manifest(edit: Callable[[Any], Any]) -> Callable[[Path], None]:
+    def prep(rd: Path) -> None:
+        import pandas as pd
+
+        m = pd.read_parquet(rd / "manifest.parquet")
+        m = edit(m)
+        m.to_parquet(rd / "manifest.parquet", index=False)
+
+    return prep
+
+
+def _set_cell(col: str, value: Any, row: int = 3) -> Callable[[Any], Any]:
+    def edit(m: Any) -> Any:
+        m[col] = m[col].astype(object) if isinstance(value, str) else m[col]
+        m.loc[row, col] = value
+        return m
+
+    return edit
+
+
+def bounded_run_cases() -> list[Case]:
+    """Hand-edited manifests, paths with control characters, and option values outside
+    their bounds (converge, analyze, atlas)."""
+    import pandas as pd
+
+    manifests = {
+        "job-id-path": _set_cell("job_id", "../../x"),
+        "job-id-absolute": _set_cell("job_id", "/tmp/x"),
+        "geometry-id-path": _set_cell("geometry_id", "../mesh"),
+        "duplicate-row": lambda m: pd.concat([m, m.iloc[[5]]], ignore_index=True),
+        "duplicate-index": _set_cell("job_index", 4, row=5),
+        "derived-width": _set_cell("wound_width_mm", 9.0),
+        "parameter-edited": _set_cell("dermal_thickness_mm", 3.0),
+        "unknown-skin": _set_cell("skin_type", "leather"),
+        "unknown-shape": _set_cell("wound_shape", "round"),
+        "empty": lambda m: m.iloc[:0],
+    }
+    cases = []
+    for name, edit in manifests.items():
+        for cmd in (
+            ["run", "RUN", "--no-progress"],
+            ["status", "RUN"],
+            ["mesh", "RUN", "--job", "3"],
+        ):
+            prep = _edit_manifest(edit)
+            cases.append(
+                Case(
+                    f"manifest-{name}-{cmd[0]}",
+                    _in_run(*cmd, prep=prep),
+                    contains="damaged manifest",
+                )
+            )
+    options = [
+        ("converge-levels-5000", ["converge", "RUN", "--job", "0", "--levels", "5000"]),
+        ("converge-levels-2", ["converge", "RUN", "--job", "0", "--levels", "2"]),
+        ("converge-ratio-1+eps", ["converge", "RUN", "--job", "0", "--ratio", "1.0000000000000002"]),
+        ("converge-ratio-nan", ["converge", "RUN", "--job", "0", "--ratio", "nan"]),
+        ("converge-ratio-inf", ["converge", "RUN", "--job", "0", "--ratio", "inf"]),
+        ("converge-refine-9", ["converge", "RUN", "--job", "0", "--refine", "9"]),
+        ("converge-factors-close", ["converge", "RUN", "--job", "0", "--factors", "0.3,0.3000001,0.31"]),
+        ("converge-factors-many", ["converge", "RUN", "--job", "0", "--factors", ",".join(f"{0.1 * 1.1**k:.4f}" for k in range(12))]),
+        ("analyze-seed-negative", ["analyze", "RUN", "--seed", "-5"]),
+        ("analyze-seed-2**70", ["analyze", "RUN", "--seed", str(2**70)]),
+        ("analyze-param-seed-2**70", ["analyze", "RUN", "--param", f"seed={2**70}"]),
+        ("analyze-param-seed-1e400", ["analyze", "RUN", "--param", "seed=1e400"]),
+        ("analyze-quantiles-1000", ["analyze", "RUN", "--quantiles", "1000"]),
+        ("analyze-nthread-0", ["analyze", "RUN", "--nthread", "0"]),
+        ("atlas-views-huge", ["atlas", "RUN", "--views", "0-99999999999999999"]),
+        ("atlas-views-reversed", ["atlas", "RUN", "--views", "5-2"]),
+        ("atlas-views-past-end", ["atlas", "RUN", "--views", "31-32"]),
+        ("atlas-out-run-dir", ["atlas", "RUN", "--out", "RUN"]),
+        ("atlas-out-results", ["atlas", "RUN", "--out", "RUN/results"]),
+        ("atlas-out-parent", ["atlas", "RUN", "--out", "RUN/.."]),
+        ("status-newline-path", ["status", "RUN/new\nline"]),
+        ("run-newline-path", ["run", "RUN\n/x"]),
+        ("generate-newline-sweep", ["generate", "RUN/s\nweep.yaml", "--out", "RUN/new"]),
+        ("status-tab-cr-path", ["status", "RUN/a\tb\rc"]),
+    ]  # fmt: skip
+    for name, argv in options:
+        cases.append(Case(name, _in_run(*argv)))
     return cases
 
 
@@ -413,7 +564,19 @@ def predict_cases() -> list[Case]:
             cases.append(Case(f"predict{opt}-{v}", _predict(opt, v), watch="none"))
     for i, meta in enumerate([b"null", b"[]", b"{", b'{"format": null}', b"\0\0"]):
         cases.append(Case(f"predict-meta-{i}", _predict(None, "", _model_meta(meta)), watch="none"))
+    for opt in PREDICT_BASE:  # finite, but no wound: refused even with --allow-extrapolation
+        for v in ("1e308", "-1e308", "1e7"):
+            cases.append(
+                Case(f"predict-extrapolated{opt}-{v}", _predict_extrapolated(opt, v), watch="none")
+            )
     return cases
+
+
+def _predict_extrapolated(opt: str, value: str) -> Callable[[Path], list[str]]:
+    def setup(ws: Path) -> list[str]:
+        return [*_predict(opt, value)(ws), "--allow-extrapolation"]
+
+    return setup
 
 
 CASES = sweep_cases() + file_cases() + run_dir_cases() + predict_cases()

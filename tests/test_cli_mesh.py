@@ -124,19 +124,29 @@ def test_not_a_run_dir(tmp_path: Path) -> None:
 
 @pytest.fixture
 def broken_run(run_dir: Path, tmp_path: Path) -> Path:
-    """A copy of the demo run whose first wedge geometry has its apex below the bottom."""
+    """A copy of the demo run whose first wedge geometry has its apex below the bottom (a
+    manifest consistent in itself: derived lengths and ids recomputed, as load_run checks)."""
+    from woundsweep.config.manifest import _derive, canonical_hash
+    from woundsweep.config.sweep import GEOMETRY_KEYS
+
     rd = tmp_path / "broken"
     shutil.copytree(run_dir, rd, ignore=shutil.ignore_patterns("meshes"))
     man = manifest(rd)
     first_wedge = man.loc[man["wound_shape"] == "wedge", "geometry_id"].iloc[0]
-    man.loc[man["geometry_id"] == first_wedge, "wound_depth_mm"] = 99.0
+    hit = man["geometry_id"] == first_wedge
+    man.loc[hit, "wound_depth_factor"] = 99.0 / man.loc[hit, "total_thickness_mm"]
+    man = _derive(man)
+    keys = [*GEOMETRY_KEYS, "skin_type", "orientation_deg"]
+    rows = man[keys].to_dict("records")
+    man["job_id"] = [canonical_hash(r) for r in rows]
+    man["geometry_id"] = [canonical_hash({k: r[k] for k in GEOMETRY_KEYS}) for r in rows]
     man.to_parquet(rd / "manifest.parquet", index=False)
     return rd
 
 
 def broken_jobs(rd: Path) -> pd.DataFrame:
     man = manifest(rd)
-    return man[man["wound_depth_mm"] == 99.0]
+    return man[np.isclose(man["wound_depth_mm"], 99.0)]
 
 
 def test_bad_geometry_names_job_and_parameter(broken_run: Path) -> None:

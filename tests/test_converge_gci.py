@@ -127,8 +127,10 @@ def test_level_factors() -> None:
     assert level_factors(0.3, 3, 1.5) == pytest.approx([0.3, 0.45, 0.675])
     assert level_factors(0.4, 3, 1.58113883)[-1] == pytest.approx(1.0)
     assert level_factors(0.5, 3, 2.0)[-1] == pytest.approx(2.0)
-    for args, text in [((0.3, 2, 1.5), "at least 3"), ((0.3, 3, 1.0), "greater than 1"),
-                       ((0.5, 5, 1.5), "reach 2.53 > 2")]:  # fmt: skip
+    for args, text in [((0.3, 2, 1.5), "expected 3"), ((0.3, 3, 1.0), "at least 1.05"),
+                       ((0.3, 3, 1.0000000000000002), "at least 1.05"),
+                       ((0.3, 11, 1.05), "to 10"), ((0.3, 5000, 1.5), "to 10"),
+                       ((0.01, 10, 2.0), "passes 2"), ((0.5, 5, 1.5), "reach 2.53 > 2")]:  # fmt: skip
         with pytest.raises(WoundsweepError, match=text) as exc:
             level_factors(*args)
         assert exc.value.exit_code == 2 and "\n" not in str(exc.value)

@@ -10,13 +10,14 @@ from __future__ import annotations
 import importlib
 import logging
 import os
+import signal
 import sys
 from typing import NoReturn
 
 import click
 
 from . import __version__
-from .core.errors import WoundsweepError, report
+from .core.errors import Interrupted, WoundsweepError, one_line, report
 
 __all__ = ["COMMANDS", "main"]
 
@@ -142,23 +143,36 @@ def cli() -> None:
     """
 
 
+def _interrupt(signum: int, frame: object) -> None:
+    raise Interrupted()
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point: user errors become one line on stderr and exit status 2 (no traceback)."""
+    old = None
+    if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+        try:
+            old = signal.signal(signal.SIGINT, _interrupt)
+        except ValueError:  # not the main thread: Ctrl-C stays Python's
+            old = None
     try:
         # With standalone_mode=False click returns ctx.exit()'s code instead of raising Exit.
         rv = cli.main(args=argv, prog_name="woundsweep", standalone_mode=False)
     except WoundsweepError as err:
         return report(err)
-    except click.exceptions.Abort:
-        click.echo("woundsweep: aborted", err=True)
-        return 130
+    except (Interrupted, click.exceptions.Abort):
+        print("woundsweep: interrupted", file=sys.stderr, flush=True)
+        return Interrupted.exit_code
     except click.ClickException as err:
-        click.echo(f"woundsweep: error: {err.format_message()}", err=True)
+        click.echo(one_line(f"woundsweep: error: {err.format_message()}"), err=True)
         return 2
     except click.exceptions.Exit as err:
         return err.exit_code
     except OSError as err:  # a filesystem error on a path no command anticipated: one line too
         return report(err)
+    finally:
+        if old is not None:
+            signal.signal(signal.SIGINT, old)
     return rv if isinstance(rv, int) else 0
 
 

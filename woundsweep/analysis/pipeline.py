@@ -9,6 +9,8 @@ written atomically.
 from __future__ import annotations
 
 import dataclasses
+import os
+import shutil
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, NamedTuple
@@ -42,6 +44,7 @@ from .settings import (
     SCHEMES,
     STRESS,
 )
+from .trained_on import trained_on
 
 __all__ = ["AnalysisOutput", "analysis_steps", "run_analysis"]
 
@@ -111,6 +114,7 @@ def run_analysis(
     settings = resolve_settings(sweep_analysis, overrides)
     q = settings.quantiles
     results, orphans = drop_orphans(load_results(rd), rd)
+    record = trained_on(rd, results)
     rows, counts = select_rows(results, drop_interpenetrating, keep_reopened)
     counts["rows_not_in_manifest"] = orphans
     if len(rows) < MIN_ROWS_PER_QUANTILE * q:
@@ -140,6 +144,7 @@ def run_analysis(
         "features": list(FEATURES),
         "importance_groups": {k: list(v) for k, v in IMPORTANCE_GROUPS.items()},
         "settings": dataclasses.asdict(settings),
+        "trained_on": record,
         "rows": counts,
         "stress_summary_kPa": {
             "min": float(stress.min()),
@@ -155,10 +160,11 @@ def run_analysis(
         "max_location_profiles": profile_summary(pos),
     }
     metrics["mesh_sensitivity"] = mesh_sensitivity(rows, metrics)
-    out = Path(out_dir) if out_dir is not None else rd / "analysis"
-    out.mkdir(parents=True, exist_ok=True)
+    final = Path(out_dir) if out_dir is not None else rd / "analysis"
+    out = _staging_dir(final)
     files: list[Path] = []
     for f in fits:
+        f.meta["trained_on"] = record  # predict compares it with the run it answers for
         files += save_model(out, f)
     if surrogate is not None:
         files += save_companions(out, surrogate, failure)
@@ -178,4 +184,29 @@ def run_analysis(
     report_path = out / "report.md"
     write_report(report_path, metrics, [p.name for p in figs])
     files.append(report_path)
-    return AnalysisOutput(out, metrics, files)
+    _swap_in(out, final)
+    return AnalysisOutput(final, metrics, [final / p.relative_to(out) for p in files])
+
+
+def _staging_dir(final: Path) -> Path:
+    """A fresh directory beside ``final`` to write the analysis into (those of dead
+    analyses removed): ``final`` is replaced only by a whole analysis."""
+    final.parent.mkdir(parents=True, exist_ok=True)
+    for old in final.parent.glob(f".{final.name}.*-*"):
+        pid = old.name.rsplit("-", 1)[1]
+        if not pid.isdigit() or not Path(f"/proc/{pid}").exists():
+            shutil.rmtree(old, ignore_errors=True)
+    stage = final.with_name(f".{final.name}.tmp-{os.getpid()}")
+    shutil.rmtree(stage, ignore_errors=True)
+    stage.mkdir()
+    return stage
+
+
+def _swap_in(stage: Path, final: Path) -> None:
+    """Replace ``final`` by ``stage`` (two renames: a reader sees the old analysis, none for
+    an instant, or the new one; never a mix)."""
+    old = final.with_name(f".{final.name}.old-{os.getpid()}")
+    if final.exists():
+        os.rename(final, old)
+    os.rename(stage, final)
+    shutil.rmtree(old, ignore_errors=True)

@@ -19,7 +19,11 @@ from .model_io import LoadedModel
 from .settings import FEATURES, SHAPE_CODES
 from .training import predict_proba
 
-__all__ = ["Prediction", "WoundPrediction", "predict", "predict_wound"]
+__all__ = ["MAX_PARAMETER", "Prediction", "WoundPrediction", "predict", "predict_wound"]
+
+# The models compute in float32: 1e308 becomes infinity there. No wound parameter (mm, factors,
+# degrees) comes near this bound.
+MAX_PARAMETER = 1e6
 
 
 class Prediction(NamedTuple):
@@ -79,6 +83,10 @@ def _check_params(
             continue
         v = params.get(name)
         values[name] = float("nan") if v is None else float(v)
+        if v is not None and not abs(values[name]) <= MAX_PARAMETER:
+            raise AnalysisError(  # refused even with --allow-extrapolation: no model answers it
+                f"{name}={values[name]:g}: expected a magnitude of at most {MAX_PARAMETER:g}"
+            )
         if v is None or name not in ranges:
             continue
         lo, hi = ranges[name]

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import click
 from tqdm import tqdm
@@ -12,6 +13,38 @@ __all__ = ["cmd"]
 
 def _mb(n: float) -> str:
     return f"{n / 1e6:.1f} MB"
+
+
+# The run's own directories: a site written there would mix with (or replace) the store.
+_RUN_PARTS = ("results", "fields", "logs", "meshes", "tmp", "corrupt", "analysis", "slurm")
+
+
+def _check_out(run_dir: Path, out: Path) -> None:
+    """--out must not be the run directory, hold it, or be one of its store's directories."""
+    from ..core.errors import StoreError
+
+    rd, target = run_dir.resolve(), out.resolve()
+    if target == rd or target in rd.parents or (target.parent == rd and target.name in _RUN_PARTS):
+        raise StoreError(
+            f"--out {out}: would write into the run directory {run_dir} (use a new directory)"
+        )
+
+
+def _warn_if_stale(run_dir: Path, results: Any) -> None:
+    """A line on stderr when RUN_DIR/analysis was trained on other settings or results."""
+    import json
+
+    from ..analysis.trained_on import stale_note
+    from ..core.errors import one_line
+
+    path = run_dir / "analysis" / "metrics.json"
+    try:
+        record = json.loads(path.read_text()).get("trained_on")
+    except (OSError, ValueError, AttributeError):
+        return  # no analysis (or none readable): the site has no analysis section to doubt
+    note = stale_note(run_dir, record, results)
+    if note:
+        click.echo(one_line(f"woundsweep: warning: {note}"), err=True)
 
 
 @click.command("atlas")
@@ -44,6 +77,7 @@ def cmd(run_dir: Path, out: Path | None, views: str) -> None:
 
     run = load_run(run_dir)
     out = out or run.run_dir / "atlas"
+    _check_out(run.run_dir, out)
     try:
         check_output_dir(out)
     except ValueError as err:
@@ -52,6 +86,7 @@ def cmd(run_dir: Path, out: Path | None, views: str) -> None:
     n_files = len(list((run.run_dir / "results").glob("job-*.parquet")))
     click.echo(f"reading and validating {n_files} result files ...", err=True)
     results = read_results(run.run_dir)
+    _warn_if_stale(run.run_dir, results[results["job_id"].isin(set(run.manifest["job_id"]))])
     stored = set(int(j) for j in results["job_index"].unique())
     has_fields = results["fields_file"].fillna("").astype(str) != ""
     with_fields = set(int(j) for j in results.loc[has_fields, "job_index"].unique())

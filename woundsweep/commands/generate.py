@@ -8,11 +8,13 @@ from pathlib import Path
 import click
 import pandas as pd
 
+from ..config.geometry import GeometrySpec
 from ..config.manifest import expand
-from ..config.sweep import MANIFEST_COLUMNS, MAX_JOBS, parse_sweep_text, read_sweep_text
-from ..core.errors import StoreError, SweepError
+from ..config.sweep import MANIFEST_COLUMNS, MAX_JOBS, Sweep, parse_sweep_text, read_sweep_text
+from ..core.errors import GeometryError, StoreError, SweepError
 from ..core.fsutil import atomic_write, atomic_write_bytes
 from ..core.provenance import provenance
+from ..core.runlock import hold_run, release
 
 __all__ = ["cmd", "generate", "stale_results"]
 
@@ -59,6 +61,18 @@ def stale_results(run_dir: Path, sweep, manifest: pd.DataFrame) -> tuple[int, in
     return stale, orphans
 
 
+def _check_cell_cap(sweep: Sweep, manifest: pd.DataFrame) -> None:
+    """Every geometry's mesh within `mesh.sizing.MAX_CELLS` by the size law (no gmsh)."""
+    from ..mesh.sizing import check_cell_cap
+
+    for row in manifest.drop_duplicates("geometry_id").to_dict("records"):
+        spec = GeometrySpec.from_row(row, sweep.stages.closure_zone, sweep.solver.element_degree)
+        try:
+            check_cell_cap(spec)
+        except GeometryError as err:
+            raise SweepError(sweep.path, "grid", str(err)) from None
+
+
 def generate(
     sweep_path: str | Path,
     run_dir: str | Path,
@@ -75,6 +89,7 @@ def generate(
     text = read_sweep_text(sweep_path)
     sweep = parse_sweep_text(text, sweep_path)
     manifest = expand(sweep, max_jobs)
+    _check_cell_cap(sweep, manifest)
     rd = Path(run_dir)
     if rd.exists() and not rd.is_dir():
         raise StoreError(f"{rd}: exists and is not a directory")
@@ -94,6 +109,21 @@ def generate(
                 f"{rd / 'manifest.parquet'}: missing, damaged or not the expansion of "
                 f"{rd / 'sweep.yaml'} (use --force to rewrite it; results are kept)"
             )
+    # Over an existing run, only while no `woundsweep run` holds it: a runner stamps its
+    # results with the sweep it loaded when it started.
+    lock = hold_run(rd, exclusive=True) if old is not None else None
+    try:
+        _write_run(rd, sweep_path, text, sweep, manifest, new)
+    finally:
+        if lock is not None:
+            release(lock)
+    return len(manifest), True
+
+
+def _write_run(
+    rd: Path, sweep_path: str | Path, text: str, sweep: Sweep, manifest: pd.DataFrame, new: dict
+) -> None:
+    """Write the manifest, the provenance record and (last) the sweep copy."""
     try:
         rd.mkdir(parents=True, exist_ok=True)
         atomic_write(rd / "manifest.parquet", lambda tmp: manifest.to_parquet(tmp, index=False))
@@ -111,7 +141,6 @@ def generate(
     except OSError as err:
         where = err.filename or rd
         raise StoreError(f"{where}: cannot write the run directory ({err.strerror})") from None
-    return len(manifest), True
 
 
 @click.command("generate")

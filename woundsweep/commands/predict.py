@@ -10,6 +10,7 @@ from typing import Any
 
 import click
 
+from ..analysis.prediction import MAX_PARAMETER
 from ..clitypes import FiniteFloat
 
 __all__ = ["cmd", "parse_params"]
@@ -41,9 +42,8 @@ _NUMERIC_PARAMS = (
 def _numeric_params(f: Callable[..., None]) -> Callable[..., None]:
     """One float option per `_NUMERIC_PARAMS` entry, in that order, named by its column."""
     for flag, column, required, text in reversed(_NUMERIC_PARAMS):
-        f = click.option(
-            flag, column, type=FiniteFloat(), required=required, default=None, help=text
-        )(f)
+        kind = FiniteFloat(-MAX_PARAMETER, MAX_PARAMETER)  # float32 in the models: bounded
+        f = click.option(flag, column, type=kind, required=required, default=None, help=text)(f)
     return f
 
 
@@ -54,6 +54,18 @@ def parse_params(shape: str, skin_type: str, numeric: dict[str, float | None]) -
         **{column: numeric[column] for _, column, _, _ in _NUMERIC_PARAMS},
         "skin_type": skin_type,
     }
+
+
+def _warn_if_stale(loaded: Any) -> None:
+    """A line on stderr when the model's run has changed its settings since `analyze`."""
+    from ..analysis.trained_on import model_run_dir, stale_note
+    from ..core.errors import one_line
+
+    run_dir = model_run_dir(loaded.path)
+    if run_dir is not None and (run_dir / "manifest.parquet").is_file():
+        note = stale_note(run_dir, loaded.meta.get("trained_on"))
+        if note:
+            click.echo(one_line(f"woundsweep: warning: {note}"), err=True)
 
 
 @click.command("predict")
@@ -105,6 +117,7 @@ def cmd(
         q, scheme_name = int(loaded.meta["quantiles"]), str(loaded.meta["scheme"])
     except (AttributeError, TypeError, KeyError, ValueError) as err:  # e.g. metadata `null`
         raise AnalysisError(f"{model}: malformed model metadata ({type(err).__name__})") from None
+    _warn_if_stale(loaded)
     params = parse_params(shape, skin_type, numeric)
     answer = predict_wound(loaded, params, list(stages) or None, allow_extrapolation, level)
     preds = answer.stages

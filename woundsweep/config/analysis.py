@@ -10,7 +10,18 @@ from typing import Any
 
 from ..core.errors import AnalysisError
 
-__all__ = ["ModelSettings", "resolve_settings"]
+__all__ = ["INT_RANGES", "ModelSettings", "resolve_settings"]
+
+# The integer settings' ranges, both ends allowed (XGBoost takes a 32-bit unsigned seed).
+INT_RANGES = {
+    "quantiles": (2, 100),
+    "seed": (0, 2**32 - 1),
+    "n_estimators": (1, 100_000),
+    "early_stopping_rounds": (1, 100_000),
+    "max_depth": (1, 32),
+    "nthread": (1, 1024),
+    "sobol_samples": (16, 2**16),
+}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -33,19 +44,16 @@ class ModelSettings:
     sobol_samples: int = 1024  # Saltelli base samples N (a power of 2): N (d + 2) surrogate calls
 
     def check(self) -> ModelSettings:
-        """Raise `AnalysisError` on values XGBoost or the splits cannot use."""
-        if self.quantiles < 2:
-            raise AnalysisError(f"analysis.quantiles: expected at least 2, got {self.quantiles}")
-        for name in ("n_estimators", "max_depth", "nthread"):
-            if getattr(self, name) < 1:
+        """Raise `AnalysisError` on values XGBoost or the splits cannot use (`INT_RANGES`)."""
+        for name, (lo, hi) in INT_RANGES.items():
+            if not lo <= getattr(self, name) <= hi:
                 raise AnalysisError(
-                    f"analysis.{name}: expected at least 1, got {getattr(self, name)}"
+                    f"analysis.{name}: expected an integer from {lo} to {hi}, "
+                    f"got {getattr(self, name)}"
                 )
         n = self.sobol_samples
-        if n < 16 or n & (n - 1):
-            raise AnalysisError(f"analysis.sobol_samples: expected a power of 2 >= 16, got {n}")
-        if self.early_stopping_rounds < 1:
-            raise AnalysisError("analysis.early_stopping_rounds: expected at least 1")
+        if n & (n - 1):
+            raise AnalysisError(f"analysis.sobol_samples: expected a power of 2, got {n}")
         if not (0 < self.train_fraction < 1 and 0 < self.validation_fraction < 1):
             raise AnalysisError(
                 "analysis: train_fraction and validation_fraction must lie in (0, 1)"
@@ -57,10 +65,11 @@ class ModelSettings:
         for name in ("subsample", "colsample_bytree"):
             if not 0 < getattr(self, name) <= 1:
                 raise AnalysisError(f"analysis.{name}: expected a value in (0, 1]")
-        if self.learning_rate <= 0 or self.min_child_weight < 0 or self.reg_lambda < 0:
-            raise AnalysisError(
-                "analysis: learning_rate must be > 0, min_child_weight and reg_lambda >= 0"
-            )
+        if not 0 < self.learning_rate <= 1:
+            raise AnalysisError("analysis.learning_rate: expected a value in (0, 1]")
+        for name in ("min_child_weight", "reg_lambda"):
+            if not 0 <= getattr(self, name) <= 1e6:
+                raise AnalysisError(f"analysis.{name}: expected a value from 0 to 1e6")
         return self
 
     def xgb_params(self) -> dict[str, Any]:
@@ -93,7 +102,7 @@ def _coerce(name: str, value: Any, kind: type) -> Any:
         if not math.isfinite(f):
             raise ValueError
         return f
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise AnalysisError(f"analysis.{name}: expected {kind.__name__}, got {value!r}") from None
 
 

@@ -12,6 +12,7 @@ import hashlib
 import itertools
 import json
 import math
+import re
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, NamedTuple, TypedDict
@@ -23,6 +24,7 @@ from ..core.errors import GeometryError, StoreError, SweepError
 from .geometry import GeometrySpec
 from .rules import compile_rule, evaluate_rule
 from .sweep import (
+    DERIVED,
     GEOMETRY_KEYS,
     GRID_AXES,
     MANIFEST_COLUMNS,
@@ -34,7 +36,19 @@ from .sweep import (
     load_sweep,
 )
 
-__all__ = ["JobRow", "Run", "canonical_hash", "count_jobs", "expand", "load_run"]
+__all__ = [
+    "ID_RE",
+    "JobRow",
+    "Run",
+    "canonical_hash",
+    "count_jobs",
+    "expand",
+    "load_run",
+    "manifest_problem",
+]
+
+# job_id and geometry_id: 16 hex digits (they name the store's files).
+ID_RE = re.compile(r"[0-9a-f]{16}")
 
 
 class JobRow(TypedDict):
@@ -210,4 +224,63 @@ def load_run(run_dir: str | Path) -> Run:
     missing = [c for c in MANIFEST_COLUMNS if c not in manifest.columns]
     if missing:
         raise StoreError(f"{manifest_path}: missing columns {missing}")
-    return Run(rd, load_sweep(sweep_path), manifest)
+    sweep = load_sweep(sweep_path)
+    problem = manifest_problem(manifest, sweep)
+    if problem:
+        raise StoreError(
+            f"{manifest_path}: damaged manifest: {problem} (rewrite it with `woundsweep "
+            f"generate SWEEP.yaml --out {rd} --force`; results are kept)"
+        )
+    return Run(rd, sweep, manifest)
+
+
+def _ids_ok(values: pd.Series) -> bool:
+    return bool(values.map(lambda v: isinstance(v, str) and ID_RE.fullmatch(v) is not None).all())
+
+
+def manifest_problem(manifest: pd.DataFrame, sweep: Sweep) -> str:
+    """What makes ``manifest`` not a manifest `expand` could have written ("" if nothing):
+    indices not 0..N-1, duplicate jobs, ids that are not 16 hex digits or not the hash of the
+    row's parameters (ids name files), derived lengths that differ from the parameters'
+    (they size the mesh), a shape or skin type the sweep does not know."""
+    n = len(manifest)
+    if n == 0:
+        return "no jobs"
+    idx = manifest["job_index"]
+    if idx.dtype.kind not in "iu" or not (idx.to_numpy() == np.arange(n)).all():
+        return f"job_index is not 0..{n - 1} in order"
+    for col in ("job_id", "geometry_id"):
+        if not _ids_ok(manifest[col]):
+            return f"a {col} is not 16 hex digits"
+    dup = manifest["job_id"].duplicated()
+    if dup.any():
+        return f"job {int(idx[dup].iloc[0])} duplicates job_id {manifest['job_id'][dup].iloc[0]}"
+    shapes, skins = manifest["wound_shape"], manifest["skin_type"]
+    if not shapes.isin(list(SHAPE_AXES)).all():
+        return f"unknown wound_shape {shapes[~shapes.isin(list(SHAPE_AXES))].iloc[0]!r}"
+    known = list(sweep.materials.skin_types)
+    if not skins.isin(known).all():
+        return f"skin_type {skins[~skins.isin(known)].iloc[0]!r} is not in the sweep"
+    params = manifest[[*GEOMETRY_KEYS, "skin_type", "orientation_deg"]].copy()
+    try:
+        derived = _derive(params.copy())
+        numeric = manifest[[*GEOMETRY_KEYS[1:], "orientation_deg", *DERIVED]].astype(float)
+    except (TypeError, ValueError):
+        return "a parameter is not a number"
+    for col in DERIVED:
+        a, b = numeric[col].to_numpy(), derived[col].to_numpy(dtype=float)
+        bad = ~np.isclose(a, b, rtol=1e-12, atol=0.0, equal_nan=True)
+        if bad.any():
+            return f"job {int(idx[bad].iloc[0])}: {col} is not derived from its parameters"
+    records = params.to_dict("records")
+    job_ids, geometry_ids = manifest["job_id"].tolist(), manifest["geometry_id"].tolist()
+    geometries: dict[str, str] = {}  # geometry_id -> its hash, computed once per geometry
+    for i, rec in enumerate(records):
+        if canonical_hash(rec) != job_ids[i]:
+            return f"job {i}: job_id is not the hash of its parameters"
+        gid = geometry_ids[i]
+        if gid not in geometries:
+            geometries[gid] = canonical_hash({k: rec[k] for k in GEOMETRY_KEYS})
+        if geometries[gid] != gid:
+            return f"job {i}: geometry_id is not the hash of its geometry"
+    return ""

@@ -10,6 +10,7 @@ sweep loads: arithmetic and ordering take numbers, ``==``/``!=`` compare like wi
 from __future__ import annotations
 
 import ast
+import math
 from collections.abc import Collection
 from typing import Any
 
@@ -48,6 +49,9 @@ def compile_rule(path: str, key: str, rule: str, names: Collection[str]) -> ast.
             )
         if isinstance(node, ast.Constant) and not isinstance(node.value, (int, float, str)):
             raise SweepError(path, key, f"unsupported constant {node.value!r} in rule {rule!r}")
+        if isinstance(node, ast.Constant) and not isinstance(node.value, str):
+            if not _finite(node.value):  # 10**400 would overflow NumPy, 1e999 is infinity
+                raise SweepError(path, key, f"number out of range in rule {_short(rule)}")
     try:
         kind = _kind(tree.body)
     except TypeError as err:
@@ -59,6 +63,13 @@ def compile_rule(path: str, key: str, rule: str, names: Collection[str]) -> ast.
             path, key, f"rule {_short(rule)} is {_KIND_NAMES[kind]}, expected a condition"
         )
     return tree
+
+
+def _finite(value: int | float) -> bool:
+    try:
+        return math.isfinite(float(value)) and abs(value) < 1e300
+    except OverflowError:
+        return False
 
 
 def _short(rule: str) -> str:

@@ -21,7 +21,9 @@ import yaml
 
 from ..core.errors import SweepError
 from ..core.fsutil import read_small_text
+from . import strictyaml
 from .analysis import ModelSettings
+from .limits import check_settings
 from .paper import Materials, StageSettings
 from .rules import compile_rule
 from .solver import DEGREES, SolverSettings
@@ -33,6 +35,8 @@ __all__ = [
     "GRID_AXES",
     "MANIFEST_COLUMNS",
     "MAX_JOBS",
+    "MAX_RULES",
+    "MAX_TEXT",
     "MAX_SWEEP_BYTES",
     "RULE_NAMES",
     "SHAPE_AXES",
@@ -48,6 +52,9 @@ __all__ = [
 MAX_SWEEP_BYTES = 1_000_000
 # Grids above this many jobs (before exclusions) are refused before they are expanded.
 MAX_JOBS = 1_000_000
+# Exclusion rules and text fields are bounded, so that loading a sweep stays cheap.
+MAX_RULES = 1000
+MAX_TEXT = {"name": 200, "description": 10_000, "rule": 1000}
 
 # Grid axes in canonical order: job_index follows this order whatever the YAML key order is.
 GRID_AXES = (
@@ -177,7 +184,7 @@ def _merge(path: str, key: str, default: Any, given: Any) -> Any:
             raise SweepError(path, key, f"expected a mapping, got {type(given).__name__}")
         # skin_types is open: new names may be added, each with the full Fung parameter set.
         if key.endswith("skin_types"):
-            out = {}
+            out = copy.deepcopy(default)  # the built-in types stay; given ones add or override
             template = default["normal"]
             for name, params in given.items():
                 if not isinstance(name, str) or not isinstance(params, dict):
@@ -287,10 +294,17 @@ def parse_sweep(data: Any, path: str = "<sweep>") -> Sweep:
     exclude = data.get("exclude") or []
     if not isinstance(exclude, list) or not all(isinstance(r, str) for r in exclude):
         raise SweepError(path, "exclude", "expected a list of rule expressions (strings)")
+    if len(exclude) > MAX_RULES:
+        raise SweepError(path, "exclude", f"expected at most {MAX_RULES} rules, got {len(exclude)}")
     for i, rule in enumerate(exclude):
+        if len(rule) > MAX_TEXT["rule"]:
+            raise SweepError(path, f"exclude[{i}]", f"longer than {MAX_TEXT['rule']} characters")
         compile_rule(path, f"exclude[{i}]", rule, RULE_NAMES)
+    for key in ("name", "description"):
+        _text(path, key, data.get(key))
 
     settings = {k: _merge(path, k, DEFAULTS[k], data.get(k)) for k in SETTINGS}
+    analysis = check_settings(path, settings)
     known = set(settings["materials"]["skin_types"])
     for name in grid["skin_type"]:
         if name not in known:
@@ -319,8 +333,22 @@ def parse_sweep(data: Any, path: str = "<sweep>") -> Sweep:
         materials=Materials.from_dict(settings["materials"]),
         stages=StageSettings.from_dict(settings["stages"]),
         solver=SolverSettings.from_dict(settings["solver"]),
-        analysis=ModelSettings(**settings["analysis"]),
+        analysis=analysis,
     )
+
+
+def _text(path: str, key: str, value: Any) -> None:
+    """``name`` and ``description``: absent, or a string of printable text within its bound
+    (a name is one line: it labels reports and pages)."""
+    if value is None:
+        return
+    if not isinstance(value, str):
+        raise SweepError(path, key, f"expected a string, got {type(value).__name__}")
+    if len(value) > MAX_TEXT[key]:
+        raise SweepError(path, key, f"longer than {MAX_TEXT[key]} characters")
+    allowed = "\t\n" if key == "description" else ""
+    if any(not c.isprintable() and c not in allowed for c in value):
+        raise SweepError(path, key, "expected printable text (a control character was found)")
 
 
 def read_sweep_text(path: str | Path) -> str:
@@ -345,12 +373,14 @@ def parse_sweep_text(text: str, path: str | Path) -> Sweep:
     """Parse and validate the YAML text of a sweep file (``path`` names it in errors)."""
     p = Path(path)
     try:
-        data = yaml.safe_load(text)
+        data = strictyaml.load(text)
     except yaml.YAMLError as err:
         mark = getattr(err, "problem_mark", None)
         where = f"line {mark.line + 1}" if mark is not None else "YAML"
         problem = getattr(err, "problem", None) or "invalid YAML"
-        raise SweepError(p, where, f"YAML syntax error: {problem}") from None
+        if not isinstance(err, strictyaml.Refused):
+            problem = f"YAML syntax error: {problem}"
+        raise SweepError(p, where, problem) from None
     except RecursionError:
         raise SweepError(p, "YAML", "nested too deeply") from None
     return parse_sweep(data, str(p))

@@ -7,12 +7,17 @@ import sys
 __all__ = [
     "AnalysisError",
     "GeometryError",
+    "Interrupted",
     "SolverError",
     "StoreError",
     "SweepError",
     "WoundsweepError",
+    "one_line",
     "report",
 ]
+
+# Control characters (a newline in a path, say) are shown escaped, so a message stays a line.
+_ESCAPES = {c: f"\\x{c:02x}" for c in (*range(32), 127)} | {10: "\\n", 13: "\\r", 9: "\\t"}
 
 
 class WoundsweepError(Exception):
@@ -48,12 +53,25 @@ class AnalysisError(WoundsweepError):
     """A store that cannot support the requested analysis."""
 
 
+class Interrupted(BaseException):
+    """Ctrl-C in the CLI (its SIGINT handler raises it in place of KeyboardInterrupt, which
+    click answers with a blank line); like KeyboardInterrupt, no ``except Exception`` stops it."""
+
+    exit_code = 130
+
+
+def one_line(text: str) -> str:
+    """``text`` with its control characters escaped (``\\n`` for a newline): one line."""
+    return text.translate(_ESCAPES)
+
+
 def report(err: WoundsweepError | OSError) -> int:
     """Print a user error, or a filesystem error on a path, as one line on stderr; return the
     exit status it calls for (the error's ``exit_code``; 2 for a filesystem error)."""
     if isinstance(err, WoundsweepError):
-        print(f"woundsweep: error: {err}", file=sys.stderr, flush=True)
+        print(one_line(f"woundsweep: error: {err}"), file=sys.stderr, flush=True)
         return int(err.exit_code)
     where = f"{err.filename}: " if err.filename else ""
-    print(f"woundsweep: error: {where}{err.strerror or err}", file=sys.stderr, flush=True)
+    text = f"woundsweep: error: {where}{err.strerror or err}"
+    print(one_line(text), file=sys.stderr, flush=True)
     return 2

@@ -7,7 +7,8 @@ first thing, so the runner's failure handling can be tested with real processes.
 
 - ``KIND``: ``hang`` (sleep forever), ``segv`` (a real segmentation fault), ``oom`` (allocate and
   touch memory until stopped), ``fail`` (an uncaught Python exception, exit status 1),
-  ``exit:<code>`` (exit at once with that status, no output).
+  ``exit:<code>`` (exit at once with that status, no output), ``enospc`` (what a full disk
+  did to a solve: HDF5's "No space left on device" error on stderr, then a segmentation fault).
 - ``@JOB``: only the job with that ``job_index`` (otherwise every job).
 - ``#ATTEMPT``: only that attempt (1-based), read from ``WOUNDSWEEP_ATTEMPT`` which the runner
   sets; lets a test show that a transient failure is retried and then succeeds.
@@ -27,7 +28,7 @@ __all__ = ["ATTEMPT_ENV", "FAULT_ENV", "FaultSpec", "maybe_inject", "parse_fault
 
 FAULT_ENV = "WOUNDSWEEP_FAULT"
 ATTEMPT_ENV = "WOUNDSWEEP_ATTEMPT"
-KINDS = ("hang", "segv", "oom", "fail", "exit")
+KINDS = ("hang", "segv", "oom", "fail", "exit", "enospc")
 # The oom fault gives up (MemoryError) after this much, so that a runner whose memory cap does
 # not work cannot take the whole machine down with it; the runner tests check who stopped it.
 OOM_CEILING_BYTES = 8 * 1024**3
@@ -88,6 +89,16 @@ def _fire(spec: FaultSpec, job_index: int) -> None:
             time.sleep(3600)
     elif spec.kind == "segv":
         ctypes.string_at(0)  # a genuine SIGSEGV, as a crashing C extension would give
+    elif spec.kind == "enospc":
+        print(
+            "HDF5-DIAG: Error detected in HDF5 (1.10.8) thread 1:\n"
+            "  #000: H5Dio.c line 291 in H5Dwrite(): can't write data\n"
+            "  #001: H5FDsec2.c line 862 in H5FD__sec2_write(): file write failed: "
+            "errno = 28, error message = 'No space left on device'",
+            file=sys.stderr,
+            flush=True,
+        )
+        ctypes.string_at(0)
     elif spec.kind == "oom":
         hoard = []
         while len(hoard) * OOM_CHUNK_BYTES < OOM_CEILING_BYTES:

@@ -146,6 +146,7 @@ class ExitCode(enum.IntEnum):
     INVALID = 2
     NOT_CONVERGED = 3
     MESH_FAILED = 4
+    SWEEP_CHANGED = 5  # a runner's job: the run's sweep differs from the one the runner stamps
 
 
 class StageResult(NamedTuple):

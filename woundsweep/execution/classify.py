@@ -29,6 +29,7 @@ __all__ = ["TRANSIENT_CLASSES", "Classified", "classify", "stability_note"]
 # same cap stops it again; rerun those with a larger --max-memory and --rerun-failed.
 TRANSIENT_CLASSES = frozenset({FailureClass.TIMEOUT, FailureClass.CRASHED})
 _OOM_RE = re.compile(r"MemoryError|std::bad_alloc|Out of memory|Cannot allocate memory")
+_DISK_FULL_RE = re.compile(r"No space left on device|Disk quota exceeded|Read-only file system")
 
 
 def stability_note(stage: Mapping[str, Any]) -> str:
@@ -43,11 +44,13 @@ def stability_note(stage: Mapping[str, Any]) -> str:
 
 
 class Classified(NamedTuple):
-    """An attempt's failure class, its one-line detail, and the solver output if valid."""
+    """An attempt's failure class, its one-line detail, and the solver output if valid;
+    ``disk_full`` is the log's words when the attempt failed on a full (or read-only) disk."""
 
     failure_class: FailureClass
     detail: str
     output: SolverOutput | None
+    disk_full: str = ""
 
 
 def classify(
@@ -70,11 +73,18 @@ def classify(
             f"killed: resident memory {att.max_rss / 2**20:.0f} MiB above the {cap:.0f} MiB cap",
             None,
         )
+    tail = log_tail(log, att.log_offset)
+    failed = os.WIFSIGNALED(status) or os.WEXITSTATUS(status) not in (
+        ExitCode.OK,
+        ExitCode.NOT_CONVERGED,
+    )
+    full = _DISK_FULL_RE.search(tail) if failed else None
+    if full:  # the disk, not the job: retrying or storing a failure would be wrong
+        return Classified(FailureClass.CRASHED, full.group(0), None, disk_full=full.group(0))
     if os.WIFSIGNALED(status):
         sig = os.WTERMSIG(status)
         return Classified(FailureClass.CRASHED, f"killed by {signal_name(sig)}", None)
     code = os.WEXITSTATUS(status)
-    tail = log_tail(log, att.log_offset)
     if code in (ExitCode.OK, ExitCode.NOT_CONVERGED):
         if not att.out.exists():
             return Classified(FailureClass.CRASHED, f"exit {code} but no output file", None)

@@ -80,6 +80,7 @@ class JobRequest(NamedTuple):
     job_index: int
     stages: tuple[int, int]
     out: str
+    fingerprint: str = ""  # the result fingerprint the runner stamps: the job must match it
 
     def command(self) -> list[str]:
         """The equivalent command line (``python -m woundsweep solve ...``)."""
@@ -348,7 +349,7 @@ def _child(req: dict[str, Any], server_pid: int, server_fds: tuple[int, ...]) ->
             faulthandler.enable(sys.stderr)
         from ..physics.entry import run_job
 
-        code = run_job(job.run_dir, job.job_index, job.stages, job.out)
+        code = run_job(job.run_dir, job.job_index, job.stages, job.out, job.fingerprint)
     except SystemExit as err:
         code = err.code if isinstance(err.code, int) else 1
     except BaseException:

@@ -55,6 +55,8 @@ class Job:
     total_cpu_s: float = 0.0
     wait_for_lock: Path | None = None
     next_lock_check: float = 0.0
+    seen_mtime_ns: int | None = None  # its result file's when the shard was scanned (or none)
+    next_claim_check: float = 0.0
 
     @property
     def index(self) -> int:

@@ -35,9 +35,10 @@ from typing import Any, NamedTuple
 import pandas as pd
 
 from ..config.manifest import JobRow, load_run
-from ..core.errors import StoreError, WoundsweepError
+from ..core.errors import StoreError, WoundsweepError, one_line
 from ..core.faults import ATTEMPT_ENV
-from ..core.schema import FailureClass, ResultState
+from ..core.runlock import claim, hold_run, release
+from ..core.schema import ExitCode, FailureClass, ResultState
 from ..store.writer import AttemptOutcome, Store
 from .classify import TRANSIENT_CLASSES, classify
 from .forkserver import ForkServer, JobRequest
@@ -81,10 +82,11 @@ class RunSummary(NamedTuple):
 
 
 class _Runner:
-    def __init__(self, run_dir: Path, opts: RunOptions) -> None:
-        self.run_dir = run_dir
+    def __init__(self, store: Store, opts: RunOptions) -> None:
+        self.run_dir = store.run_dir
         self.opts = opts
-        self.store = Store(run_dir)
+        self.store = store  # its sweep stamps the results and is the one each job must have
+        self.claims: dict[str, int] = {}  # job_id -> the claim on its log (`core.runlock`)
         self.running: dict[int, Attempt] = {}
         self.by_class: dict[str, int] = {}
         self.attempts = 0
@@ -98,7 +100,7 @@ class _Runner:
         if opts.workers > 1:  # K processes on K cores: threads inside each would oversubscribe
             for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
                 self.env[var] = "1"
-        self.server = ForkServer(self.env, str(run_dir))  # forks the attempts' processes
+        self.server = ForkServer(self.env, str(self.run_dir))  # forks the attempts' processes
 
     # -- starting ------------------------------------------------------------------------
     def start(self, job: Job) -> None:
@@ -107,7 +109,8 @@ class _Runner:
         out = self.store.tmp_path(job.job_id, job.attempts)
         log = self.store.log_path(job.job_id)
         a, b = self.opts.stages
-        request = JobRequest(str(self.run_dir), int(job.index), (a, b), str(out))
+        stamp = self.store.fingerprint(job.row)
+        request = JobRequest(str(self.run_dir), int(job.index), (a, b), str(out), stamp)
         cmd = request.command()
         env = dict(self.env)
         env[ATTEMPT_ENV] = str(job.attempts)
@@ -158,6 +161,29 @@ class _Runner:
                     kill_group(pid)
         return done
 
+    # -- claims (two runners of one shard share its jobs) --------------------------------
+    def claim(self, job: Job) -> bool | None:
+        """True: this runner holds the job's claim; False: another runner does (try later);
+        None: another runner stored the job since this one scanned the shard (skip it)."""
+        if job.job_id in self.claims:
+            return True
+        if time.time() < job.next_claim_check:
+            return False
+        fd = claim(self.store.log_path(job.job_id))
+        if fd is None:
+            job.next_claim_check = time.time() + 1.0
+            return False
+        self.claims[job.job_id] = fd
+        if _mtime_ns(self.store.result_path(job.job_id)) != job.seen_mtime_ns:
+            self.unclaim(job)
+            return None
+        return True
+
+    def unclaim(self, job: Job) -> None:
+        fd = self.claims.pop(job.job_id, None)
+        if fd is not None:
+            release(fd)
+
     def kill_all(self) -> None:
         for pid, att in list(self.running.items()):
             kill_group(pid)
@@ -170,6 +196,13 @@ class _Runner:
     def finish(self, att: Attempt, status: int, usage: Any) -> AttemptOutcome | None:
         """Classify; returns the outcome to store, or None when the job is retried."""
         job = att.job
+        if os.WIFEXITED(status) and os.WEXITSTATUS(status) == ExitCode.SWEEP_CHANGED:
+            att.out.unlink(missing_ok=True)
+            raise StoreError(
+                f"{self.run_dir / 'sweep.yaml'} changed while this run was in progress (job "
+                f"{job.index} refused it; nothing stored for it): rerun `woundsweep run` to go on "
+                "with the sweep there now"
+            )
         end = time.time()
         wall = end - att.started
         cpu = (usage.ru_utime + usage.ru_stime) if usage is not None else 0.0
@@ -179,6 +212,12 @@ class _Runner:
             att.max_rss = max(att.max_rss, usage.ru_maxrss * 1024)  # ru_maxrss is in KiB
         log = self.store.log_path(job.job_id)
         cls = classify(att, status, self.opts.stages, self.opts.max_memory_bytes, log)
+        if cls.disk_full:
+            att.out.unlink(missing_ok=True)
+            raise StoreError(
+                f"{self.run_dir}: cannot write the store ({cls.disk_full}): job {job.index} "
+                f"stopped, nothing stored for it; free space and rerun (see {log})"
+            )
         with open(log, "ab") as fh:
             fh.write(
                 f"=== attempt {job.attempts} ended: {cls.failure_class}"
@@ -234,7 +273,7 @@ def _store(store: Store, row: JobRow, outcome: AttemptOutcome, opts: RunOptions)
         store.write_job(row, outcome, opts.stages, opts.fields, str(opts.shard))
         return
     except OSError as err:
-        if err.errno in (errno.ENOSPC, errno.EDQUOT, errno.EROFS):
+        if err.errno in (errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EFBIG):
             raise StoreError(f"{store.run_dir}: cannot write the store ({err.strerror})") from None
         detail = f"output could not be stored: {err}"
     except (KeyError, ValueError, TypeError) as err:
@@ -265,15 +304,34 @@ def _on_sigterm(signum: int, frame: Any) -> None:
     raise Terminated("terminated by SIGTERM: running jobs killed; rerun to resume")
 
 
+def _mtime_ns(path: Path) -> int | None:
+    try:
+        return path.stat().st_mtime_ns
+    except FileNotFoundError:
+        return None
+
+
 def run_shard(run_dir: str | Path, opts: RunOptions) -> RunSummary:
-    """Run every job of ``opts.shard`` that is not already complete in the store."""
+    """Run every job of ``opts.shard`` that is not already complete in the store.
+
+    The run directory is held (`core.runlock`) for the whole run, so its sweep cannot be
+    rewritten meanwhile; each job is claimed before it starts, so runners of one shard share it.
+    """
+    store = Store(load_run(run_dir).run_dir)
+    store.ensure_dirs()
+    lock = hold_run(store.run_dir, exclusive=False)
+    try:
+        return _run_held(store.run_dir, opts)
+    finally:
+        release(lock)
+
+
+def _run_held(run_dir: Path, opts: RunOptions) -> RunSummary:
     from tqdm import tqdm
 
     t0 = time.time()
-    run = load_run(run_dir)
-    run_dir = run.run_dir
+    run = load_run(run_dir)  # again, under the lock: the sweep every result is stamped with
     store = Store(run_dir, run.sweep)
-    store.ensure_dirs()
     store.clean_tmp()
     clear_stale_jit_locks(jit_cache_dir(), opts.jit_stale_after_s)
     shard = shard_jobs(run.manifest, opts.shard)
@@ -286,15 +344,18 @@ def run_shard(run_dir: str | Path, opts: RunOptions) -> RunSummary:
             ResultState.DAMAGED,
         ):  # damaged: its fields or mesh file go too
             moved = store.quarantine(jid, files=st.state == ResultState.DAMAGED)
-            print(f"woundsweep run: {st.reason}; moved to {moved}, rerunning", file=sys.stderr)
+            print(
+                one_line(f"woundsweep run: {st.reason}; moved to {moved}, rerunning"),
+                file=sys.stderr,
+            )
         elif st.state == ResultState.DONE and not (
             opts.rerun_failed and st.failure_class != FailureClass.CONVERGED
         ):
             skipped += 1
             continue
-        todo.append(Job(row))
+        todo.append(Job(row, seen_mtime_ns=_mtime_ns(store.result_path(jid))))
 
-    runner = _Runner(run_dir, opts)
+    runner = _Runner(store, opts)
     queue: deque[Job] = deque(todo)
     failed = 0
     tqdm.monitor_interval = 0  # no monitor thread: the runner forks with preexec_fn
@@ -314,8 +375,12 @@ def run_shard(run_dir: str | Path, opts: RunOptions) -> RunSummary:
                 if len(runner.running) >= limit:
                     break
                 job = queue.popleft()
-                if runner.ready(job):
+                claimed = runner.claim(job) if runner.ready(job) else False
+                if claimed:
                     runner.start(job)
+                elif claimed is None:  # stored by another runner of the shard meanwhile
+                    skipped += 1
+                    bar.update(1)
                 else:
                     queue.append(job)
             finished = runner.poll()
@@ -328,6 +393,7 @@ def run_shard(run_dir: str | Path, opts: RunOptions) -> RunSummary:
                     _store(store, att.job.row, outcome, opts)
                 finally:
                     att.out.unlink(missing_ok=True)
+                    runner.unclaim(att.job)
                 runner.by_class[outcome.failure_class] = (
                     runner.by_class.get(outcome.failure_class, 0) + 1
                 )
@@ -344,6 +410,8 @@ def run_shard(run_dir: str | Path, opts: RunOptions) -> RunSummary:
         signal.signal(signal.SIGTERM, old_term)
         runner.server.close()
         bar.close()
+        for fd in runner.claims.values():
+            release(fd)
     return RunSummary(
         jobs=len(shard),
         skipped=skipped,

@@ -36,7 +36,14 @@ from ..core.schema import (
     Y_MIN,
 )
 from .fusiform import fusiform_quarter
-from .sizing import MESH_LAW_VERSION, SIZE_LAW, mesh_size_mm, size_scale, wound_size
+from .sizing import (
+    MESH_LAW_VERSION,
+    SIZE_LAW,
+    check_cell_cap,
+    mesh_size_mm,
+    size_scale,
+    wound_size,
+)
 
 __all__ = ["MeshData", "build_mesh", "signed_volumes"]
 
@@ -333,6 +340,7 @@ def build_mesh(spec: GeometrySpec) -> MeshData:
 
     Raises GeometryError when the geometry cannot be built or meshed.
     """
+    check_cell_cap(spec)  # before gmsh: a patch too large for any mesh is refused at once
     start = time.perf_counter()
     try:
         with _gmsh_model("woundsweep"):

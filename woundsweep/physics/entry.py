@@ -20,7 +20,7 @@ from ..core.faults import maybe_inject
 from ..core.fsutil import check_output_file
 from ..core.schema import ExitCode, StageResult, StageStatus
 
-__all__ = ["run_job", "solve"]
+__all__ = ["SweepChanged", "run_job", "solve"]
 
 _HEADER = (
     f"{'stage':>5} {'status':<21}{'newton':>7}{'time s':>8}{'p99 vM kPa':>12}"
@@ -45,12 +45,26 @@ def _row(r: StageResult) -> str:
     )
 
 
+class SweepChanged(WoundsweepError):
+    """The run's sweep gives the job another fingerprint than the runner stamps its result
+    with (the sweep was rewritten while the run was in progress)."""
+
+    exit_code = ExitCode.SWEEP_CHANGED
+
+
 def solve(
-    run_dir: str | Path, job_index: int, stages: tuple[int, int], out: str | Path | None
+    run_dir: str | Path,
+    job_index: int,
+    stages: tuple[int, int],
+    out: str | Path | None,
+    fingerprint: str = "",
 ) -> None:
     """Solve manifest job ``job_index`` of ``run_dir`` through stages 1..B, report A..B on
     stdout and write them to ``out`` (default ``RUN_DIR/solve/job_<N>.h5``); raise
-    `NotConvergedError` (exit 3, the file written) when a stage did not converge."""
+    `NotConvergedError` (exit 3, the file written) when a stage did not converge.
+
+    With ``fingerprint`` (a runner's job) the run's sweep, loaded once here and solved with,
+    must give the job that result fingerprint (`SweepChanged` otherwise, before any work)."""
     maybe_inject(job_index)  # test-only fault switch (WOUNDSWEEP_FAULT)
     # Each job is one serial process; threaded BLAS would only fight the sibling workers.
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
@@ -60,7 +74,14 @@ def solve(
             check_output_file(out)
         except ValueError as err:
             raise SolverError(f"--out {err}") from None
-    load_run(run_dir)  # a bad run directory fails here, before DOLFINx is imported
+    run = load_run(run_dir)  # a bad run directory fails here, before DOLFINx is imported
+    if fingerprint:
+        from ..store.identity import result_fingerprint
+
+        if result_fingerprint(run.sweep, run.job(job_index)) != fingerprint:
+            raise SweepChanged(
+                f"job {job_index}: {Path(run_dir) / 'sweep.yaml'} changed since the run started"
+            )
     from .job import NotConvergedError, StageRecord, solve_job
 
     logging.getLogger().setLevel(logging.WARNING)  # FFCx/cffi log every compile at INFO
@@ -71,7 +92,7 @@ def solve(
         if rec.result.stage >= stages[0]:
             print(_row(rec.result), flush=True)
 
-    outcome = solve_job(run_dir, job_index, stages, out, echo=echo)
+    outcome = solve_job(run_dir, job_index, stages, out, echo=echo, run=run)
     for rec in outcome.records:
         if rec.result.status == StageStatus.NOT_RUN:
             print(_row(rec.result))
@@ -81,10 +102,12 @@ def solve(
         raise NotConvergedError(f"job {job_index}: stage {bad.stage} {bad.status}")
 
 
-def run_job(run_dir: str, job_index: int, stages: tuple[int, int], out: str) -> int:
+def run_job(
+    run_dir: str, job_index: int, stages: tuple[int, int], out: str, fingerprint: str = ""
+) -> int:
     """`solve` in a job process: an error becomes one line on stderr and its exit status."""
     try:
-        solve(run_dir, job_index, stages, out)
+        solve(run_dir, job_index, stages, out, fingerprint)
     except (WoundsweepError, OSError) as err:
         sys.stdout.flush()
         return report(err)

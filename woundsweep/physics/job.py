@@ -329,6 +329,7 @@ def solve_job(
     out: str | Path | None = None,
     echo: Callable[[StageRecord], None] | None = None,
     jit: dict[str, Any] | None = None,
+    run: Run | None = None,
 ) -> JobOutcome:
     """Solve manifest job ``job_index`` of a run directory through ``stages`` (A, B).
 
@@ -338,7 +339,7 @@ def solve_job(
     from ..config.manifest import load_run
     from ..mesh.cache import get_mesh
 
-    run = load_run(run_dir)
+    run = run if run is not None else load_run(run_dir)  # a caller's run: its sweep, checked
     row = run.job(job_index)
     mesh = get_mesh(run.run_dir, str(row["geometry_id"]), run.geometry(row)).mesh
     model, materials = job_model(run, row, mesh, jit)

@@ -27,7 +27,13 @@ from ..core.versions import (
     STATISTICS_VERSION,
 )
 
-__all__ = ["file_sha256", "fingerprints", "result_fingerprint"]
+__all__ = [
+    "file_sha256",
+    "fingerprints",
+    "result_fingerprint",
+    "results_fingerprint",
+    "settings_fingerprint",
+]
 
 _JOB_KEYS = (*GEOMETRY_KEYS, "orientation_deg", "skin_type")
 
@@ -78,6 +84,24 @@ def fingerprints(sweep: Sweep, manifest: Any) -> dict[str, str]:
     return {
         str(row["job_id"]): result_fingerprint(sweep, row) for row in manifest.to_dict("records")
     }
+
+
+def _digest(pairs: Any) -> str:
+    blob = json.dumps(sorted(pairs), separators=(",", ":"))
+    return hashlib.sha256(blob.encode()).hexdigest()
+
+
+def settings_fingerprint(sweep: Sweep, manifest: Any) -> str:
+    """sha256 of every manifest job's id and `result_fingerprint`: what a run's results are
+    computed from (another value once a sweep changes a job's settings, or its jobs)."""
+    return _digest(fingerprints(sweep, manifest).items())
+
+
+def results_fingerprint(frame: Any) -> str:
+    """sha256 of the (job_id, result_fingerprint) pairs of a table of result rows (a
+    DataFrame): which results, computed from what."""
+    pairs = frame[["job_id", "result_fingerprint"]].drop_duplicates()
+    return _digest((str(j), str(f)) for j, f in pairs.itertuples(index=False))
 
 
 def file_sha256(path: str | Path, _memo: dict[tuple[str, int, int], str] | None = None) -> str:

@@ -34,6 +34,8 @@ __all__ = [
     "META_KEY",
     "RESULT_NAME",
     "STAGE_FIELDS",
+    "FIELDS_NAME",
+    "MESH_NAME",
     "FilesDamaged",
     "ResultCheck",
     "StoreScan",
@@ -43,10 +45,12 @@ __all__ = [
     "read_footer",
     "read_results",
     "result_files",
+    "read_parquet_file",
     "result_schema",
     "scan_results",
     "scan_store",
     "stale_reason",
+    "store_file_names",
     "validate_result_file",
 ]
 
@@ -83,6 +87,9 @@ _JOB_FIELDS: dict[str, pa.DataType] = {
 META_KEY = b"woundsweep"
 # The names the store gives its result files; anything else in results/ is not the store's.
 RESULT_NAME = re.compile(r"job-([0-9a-f]{16})\.parquet")
+# The names a footer may give its fields and mesh files: plain names in fields/, never a path.
+FIELDS_NAME = re.compile(r"[0-9a-f]{16}\.h5")
+MESH_NAME = re.compile(r"mesh-[0-9a-f]{16}\.h5")
 
 
 class FilesDamaged(StoreError):
@@ -115,6 +122,28 @@ def result_schema() -> pa.Schema:
     fields += [pa.field(k, t) for k, t in STAGE_FIELDS.items()]
     fields += [pa.field(k, t) for k, t in _JOB_FIELDS.items()]
     return pa.schema(fields)
+
+
+def read_parquet_file(path: str | Path, **kwargs: Any) -> pa.Table:
+    """One Parquet file as a table. `pq.read_table` reads ``x=y`` parts of the path as hive
+    partitions and adds their columns, so a store under ``/data/exp=1`` would not match its
+    schema; a `ParquetFile` is the file alone, whatever the path."""
+    with pq.ParquetFile(path, **kwargs) as pf:
+        return pf.read()
+
+
+def store_file_names(meta: Mapping[str, Any], job_id: str | None = None) -> tuple[str, str]:
+    """The fields and mesh file names of footer ``meta``: "" or a plain name of the store's
+    pattern (the job's own fields file); StoreError for anything else (a path, ``..``)."""
+    names = []
+    for key, pattern in (("fields_file", FIELDS_NAME), ("mesh_file", MESH_NAME)):
+        name = meta.get(key) or ""
+        if not isinstance(name, str) or (name and not pattern.fullmatch(name)):
+            raise StoreError(f"its footer's {key} {name!r} is not a file name of the store")
+        names.append(name)
+    if job_id is not None and names[0] and names[0] != f"{job_id}.h5":
+        raise StoreError(f"its footer's fields_file {names[0]!r} is not job {job_id}'s")
+    return names[0], names[1]
 
 
 def read_footer(path: Path) -> dict[str, Any] | None:
@@ -154,7 +183,7 @@ def validate_result_file(
     if not path.is_file():  # a named pipe would block the reader
         raise StoreError(f"{path}: corrupt result file (not a regular file)")
     try:
-        table = pq.read_table(path, page_checksum_verification=True)
+        table = read_parquet_file(path, page_checksum_verification=True)
     except Exception as err:  # pyarrow raises OSError, ArrowInvalid, ... for damaged files
         raise StoreError(f"{path}: corrupt result file ({type(err).__name__})") from None
     if not table.schema.remove_metadata().equals(result_schema()):
@@ -176,6 +205,13 @@ def validate_result_file(
     found = table.column("stage").to_pylist()
     if found != list(range(lo, hi + 1)):
         raise StoreError(f"{path}: expected stages {lo}-{hi}, found {found}")
+    try:
+        names = store_file_names(meta, meta.get("job_id"))
+    except StoreError as err:
+        raise StoreError(f"{path}: corrupt result file ({err})") from None
+    for key, name in zip(("fields_file", "mesh_file"), names):
+        if set(table.column(key).to_pylist()) - {name}:
+            raise StoreError(f"{path}: corrupt result file ({key} differs from its footer's)")
     check_files(path, meta, run_dir, verify=verify_files, memo=memo)
     meta["_table"] = table
     return meta
@@ -186,14 +222,13 @@ def check_files(
 ) -> None:
     """`FilesDamaged` unless the fields and mesh files of result ``path`` (footer ``meta``)
     exist with the recorded size and, with ``verify``, the recorded sha256."""
-    ff = meta.get("fields_file") or ""
+    ff, mf = store_file_names(meta)  # validated with the footer: plain names only
     if ff:
         fpath = run_dir / "fields" / ff
         if not fpath.is_file() or fpath.stat().st_size != meta.get("fields_bytes"):
             raise FilesDamaged(f"{path}: its fields file {fpath} is missing or truncated")
         if verify and file_sha256(fpath, memo) != meta.get("fields_sha256"):
             raise FilesDamaged(f"{path}: its fields file {fpath} is damaged (sha256 differs)")
-    mf = meta.get("mesh_file") or ""
     if mf:
         mpath = run_dir / "fields" / mf
         if not mpath.is_file():

@@ -51,7 +51,14 @@ from ..core.fsutil import atomic_write
 from ..core.schema import FailureClass, ResultState, StageResult, StageStatus
 from ..core.versions import RESULT_FORMAT_VERSION
 from .identity import file_sha256, fingerprints, result_fingerprint
-from .reader import META_KEY, check_result, content_digest, read_footer, result_schema
+from .reader import (
+    META_KEY,
+    check_result,
+    content_digest,
+    read_footer,
+    result_schema,
+    store_file_names,
+)
 from .solverfile import MESH_DATASETS, MESH_GROUP, SolverOutput, stage_group, stage_of_group
 
 __all__ = [
@@ -203,10 +210,14 @@ class Store:
         stamp = int(time.time())
         if files:
             meta = read_footer(src) or {}  # a damaged footer names no files to move
-            for name, key in (("fields_file", "fields_sha256"), ("mesh_file", "mesh_sha256")):
-                f = self.fields_dir / str(meta.get(name) or "")
-                if meta.get(name) and f.is_file():
-                    if name == "mesh_file" and file_sha256(f) == meta.get(key):
+            try:  # only the store's own plain names: a crafted footer moves nothing outside
+                names = store_file_names(meta, job_id)
+            except StoreError:
+                names = ("", "")
+            for name, key in zip(names, ("fields_sha256", "mesh_sha256")):
+                f = self.fields_dir / name
+                if name and f.is_file():
+                    if key == "mesh_sha256" and file_sha256(f) == meta.get(key):
                         continue  # the geometry's mesh is intact: other jobs use it
                     os.replace(f, self.corrupt_dir / f"{f.name}.{stamp}")
         dst = self.corrupt_dir / f"{src.name}.{stamp}"

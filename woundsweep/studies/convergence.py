@@ -56,12 +56,25 @@ QUANTITIES = (
 )
 
 
+# Bounds of a study: levels closer than MIN_RATIO mesh (nearly) alike, and every level and
+# refinement multiplies the cost.
+MAX_LEVELS = 10
+MIN_RATIO = 1.05
+MAX_REFINEMENTS = 3
+
+
 def level_factors(mesh_size_factor: float, levels: int, ratio: float) -> list[float]:
     """The mesh size factors m r^k, k = 0..levels-1 (WoundsweepError, exit 2, if invalid)."""
-    if levels < 3:
-        raise WoundsweepError(f"--levels {levels}: at least 3 levels are needed for an order")
-    if not ratio > 1:
-        raise WoundsweepError(f"--ratio {ratio:g}: must be greater than 1")
+    if not 3 <= levels <= MAX_LEVELS:
+        raise WoundsweepError(f"--levels {levels}: expected 3 (for an order) to {MAX_LEVELS}")
+    if not ratio >= MIN_RATIO:
+        raise WoundsweepError(
+            f"--ratio {ratio:g}: must be at least {MIN_RATIO:g} (closer levels mesh alike)"
+        )
+    if levels * math.log(ratio) > math.log(FINEST_FACTOR / mesh_size_factor) + 1:
+        raise WoundsweepError(  # ratio**k would overflow long before the check below
+            f"--levels {levels} --ratio {ratio:g}: the finest level passes {FINEST_FACTOR:g}"
+        )
     factors = [mesh_size_factor * ratio**k for k in range(levels)]
     if factors[-1] > FINEST_FACTOR * (1 + 1e-12):
         raise WoundsweepError(
@@ -75,8 +88,11 @@ def level_factors(mesh_size_factor: float, levels: int, ratio: float) -> list[fl
 def check_refinements(refinements: int, factors: list[float] | None) -> None:
     """``--refine K``: K >= 2 (three levels), with at most one listed factor (the base mesh);
     WoundsweepError, exit 2, otherwise."""
-    if refinements < 2:
-        raise WoundsweepError(f"--refine {refinements}: at least 2 refinements (3 levels)")
+    if not 2 <= refinements <= MAX_REFINEMENTS:
+        raise WoundsweepError(
+            f"--refine {refinements}: expected 2 (3 levels) to {MAX_REFINEMENTS} refinements "
+            "(cells times 8 each)"
+        )
     if factors is not None and len(factors) != 1:
         raise WoundsweepError("--refine takes one --factors value (the base mesh's), or none")
 
@@ -90,10 +106,14 @@ def parse_factors(text: str, minimum: int = 3) -> list[float]:
         raise WoundsweepError(f"--factors {text!r}: expected numbers separated by commas") from None
     if len(factors) < minimum:
         raise WoundsweepError(f"--factors {text!r}: at least 3 levels are needed for an order")
+    if len(factors) > MAX_LEVELS:
+        raise WoundsweepError(f"--factors {text!r}: at most {MAX_LEVELS} levels")
     if not all(0 < f <= FINEST_FACTOR for f in factors):
         raise WoundsweepError(f"--factors {text!r}: each must be in (0, {FINEST_FACTOR:g}]")
-    if any(b <= a for a, b in zip(factors, factors[1:])):
-        raise WoundsweepError(f"--factors {text!r}: must increase (coarse to fine)")
+    if any(b < a * MIN_RATIO for a, b in zip(factors, factors[1:])):
+        raise WoundsweepError(
+            f"--factors {text!r}: must increase (coarse to fine) by at least {MIN_RATIO:g} times"
+        )
     return factors
 
 

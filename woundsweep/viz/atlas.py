@@ -72,6 +72,11 @@ def parse_views(spec: str, job_indices: list[int]) -> set[int]:
             raise StoreError(
                 f"--views {spec!r}: expected all, none or job indices like 0-9,15"
             ) from None
+        for end in (a, b):  # before the range is built: 0-99999999999999999 is refused
+            if end not in have:
+                raise StoreError(f"--views {spec!r}: no job {end} in the run")
+        if a > b:
+            raise StoreError(f"--views {spec!r}: the range {a}-{b} is empty (low-high)")
         chosen |= set(range(a, b + 1))
     missing = sorted(chosen - have)
     if missing:

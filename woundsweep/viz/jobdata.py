@@ -21,6 +21,7 @@ from ..config.manifest import JobRow, Run
 from ..config.paper import Materials
 from ..core.errors import StoreError
 from ..core.schema import PROFILE_LINES, FailureClass, StageStatus
+from ..store.reader import store_file_names
 from ..store.solverfile import (
     CLOSURE_LINE_DATASETS,
     MESH_GROUP,
@@ -112,6 +113,14 @@ def _read_h5(path: Path) -> tuple[dict[str, Any], dict[str, dict[str, np.ndarray
     return attrs, groups
 
 
+def _plain_names(job: JobRow, fields_file: str, mesh_file: str) -> None:
+    """File names read from the store stay inside RUN_DIR/fields (`store_file_names`)."""
+    try:
+        store_file_names({"fields_file": fields_file, "mesh_file": mesh_file}, job["job_id"])
+    except StoreError as err:
+        raise StoreError(f"job {job['job_index']}: {err}") from None
+
+
 def _mesh_arrays(run: Run, job: JobRow, groups: dict[str, Any], mesh_file: str):
     if MESH_GROUP in groups:
         mesh = groups[MESH_GROUP]
@@ -176,6 +185,7 @@ def load_job(
         raise StoreError(f"job {job['job_index']} has no stored result yet (run `woundsweep run`)")
     fields_file = str(rows[0]["fields_file"] or "")
     mesh_file = str(rows[0]["mesh_file"] or "")
+    _plain_names(job, fields_file, mesh_file)
     groups: dict[str, Any] = {}
     stored: list[int] = []
     if fields_file:
@@ -184,6 +194,7 @@ def load_job(
             raise StoreError(f"fields/{fields_file}: holds job {attrs.get('job_id')!r}")
         stored = [int(k) for k in json.loads(attrs.get("stored_stages", "[]"))]
         mesh_file = str(attrs.get("mesh_file", mesh_file) or mesh_file)
+        _plain_names(job, fields_file, mesh_file)
     source = f"fields/{fields_file}"
     return _assemble(run, job, rows, groups, stored, mesh_file, source, cache)
 

@@ -26,7 +26,12 @@ def manifest(rd: Path) -> pd.DataFrame:
 
 
 def solver_file(
-    path: Path, job: pd.Series, stages: range, fail_at: int | None = None, mesh_seed: int = 0
+    path: Path,
+    job: pd.Series,
+    stages: range,
+    fail_at: int | None = None,
+    mesh_seed: int = 0,
+    reopened_at: int | None = None,
 ) -> dict[int, dict[str, Any]]:
     """Write a solver output per docs/design.md; returns the stage results written."""
     rng = np.random.default_rng(int(job["job_index"]) + 100)
@@ -58,6 +63,7 @@ def solver_file(
                 "max_location_z_mm": -0.3, "closure_gap_max_mm": 0.01 * k, "min_J": 0.8,
                 "n_penetrating": 0, "max_penetration_mm": 0.0, "contact_force_mN": 0.0,
                 "residual_norm": 1e-9, "dofs": 3 * n, "cells": m, "future_field": k,
+                "closed": None if k == 1 else int(k != reopened_at),
             }  # fmt: skip
         f.attrs["stage_results"] = json.dumps(list(results.values()))
     return results

@@ -154,3 +154,26 @@ def test_status_counts_the_reopened_stages() -> None:
     s = summarize(manifest, df)
     assert s["reopened_by_stage"] == {"4": 1, "5": 1}
     assert s["closure_rows"] == 9 and s["closed_rows"] == 7
+
+
+def test_a_reopened_stage_is_stored_and_counted(empty_run, capsys) -> None:
+    """Through the store: a job whose stage 4 reopened is stored with closed = 0 there,
+    `status` counts it, and the stress model's rows leave it out."""
+    import json
+
+    from store_files import store_converged
+
+    from woundsweep.cli import main
+    from woundsweep.store.reader import read_results
+
+    store_converged(empty_run, 0, reopened_at=4)
+    store_converged(empty_run, 1)
+    df = read_results(empty_run)
+    flags = df.set_index(["job_index", "stage"])["closed"]
+    assert flags.loc[(0, 4)] == 0 and flags.loc[(0, 5)] == 1 and flags.loc[(1, 4)] == 1
+    assert main(["status", str(empty_run), "--json"]) == 0
+    s = json.loads(capsys.readouterr().out)
+    assert s["reopened_by_stage"] == {"4": 1}
+    assert s["closure_rows"] == 10 and s["closed_rows"] == 9
+    used, counts = select_rows(df)
+    assert counts["reopened_rows"] == 1 and len(used) == 11

@@ -281,3 +281,19 @@ def test_render_check_sees_nan_faces(store: Path, tmp_path: Path) -> None:
     writer.Write()
     stats = render_surface(out / "job-0" / "job-0_stage6.vtm", tmp_path / "nan.png")
     assert stats["nan_cells"] > 100 and stats["nan_pixels"] > 1000, stats
+
+
+def test_an_inverted_cell_has_no_stress_and_no_error() -> None:
+    """A cell whose vertex interpolant is inverted (possible for a P2 field) gets NaN stress
+    and principal stresses; its neighbours keep theirs."""
+    from woundsweep.config.paper import Materials
+    from woundsweep.viz.mechanics import cell_mechanics
+
+    X = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 1]], dtype=float)
+    cells = np.array([[0, 1, 2, 3], [1, 2, 3, 4]])
+    u = np.zeros_like(X)
+    u[0] = 0.6  # vertex 0 (in cell 0 only) pushed through the opposite face x + y + z = 1
+    tags = np.array([DERMIS, SUBCUTIS], dtype=np.int32)
+    m = cell_mechanics(X, cells, tags, u, Materials.table2(), "normal", 0.0)
+    assert m.det_F[0] < 0 and np.isnan(m.cauchy_kPa[0]).all() and np.isnan(m.principal_kPa[0]).all()
+    assert np.isfinite(m.cauchy_kPa[1]).all() and np.isfinite(m.principal_kPa[1]).all()

@@ -103,14 +103,20 @@ def cell_mechanics(
     P = np.zeros_like(F)
     dermis, sub = np.asarray(cell_tags) == DERMIS, np.asarray(cell_tags) == SUBCUTIS
     skin = materials.skin_types[skin_type]
-    if dermis.any():
-        P[dermis] = first_piola(lambda G: _fung(skin, orientation_deg, G), F[dermis])
-    if sub.any():
-        P[sub] = first_piola(lambda G: _mooney_rivlin(materials.subcutis, G), F[sub])
-    sigma = P @ F.transpose(0, 2, 1) / J[:, None, None]
+    # A cell whose vertex interpolant of a P2 field is inverted or extreme has no stress (NaN):
+    # the Fung exponential overflows there instead of raising.
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        if dermis.any():
+            P[dermis] = first_piola(lambda G: _fung(skin, orientation_deg, G), F[dermis])
+        if sub.any():
+            P[sub] = first_piola(lambda G: _mooney_rivlin(materials.subcutis, G), F[sub])
+        sigma = P @ F.transpose(0, 2, 1) / J[:, None, None]
     sigma = 0.5 * (sigma + sigma.transpose(0, 2, 1))
+    bad = ~np.isfinite(sigma).all(axis=(1, 2)) | (J <= 0)
+    sigma[bad] = np.nan
     dev = sigma - _tr(sigma)[:, None, None] / 3.0 * np.eye(3)
     vm = np.sqrt(1.5 * np.einsum("mij,mij->m", dev, dev))
-    principal = np.linalg.eigvalsh(sigma)[:, ::-1]
+    principal = np.full((len(sigma), 3), np.nan)
+    principal[~bad] = np.linalg.eigvalsh(sigma[~bad])[:, ::-1]
     E = 0.5 * (F.transpose(0, 2, 1) @ F - np.eye(3))
     return CellMechanics(F, J, E, sigma, vm, np.ascontiguousarray(principal))

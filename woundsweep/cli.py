@@ -147,8 +147,22 @@ def _interrupt(signum: int, frame: object) -> None:
     raise Interrupted()
 
 
+# On Python >= 3.14 the resource tracker that multiprocessing starts for a library's
+# semaphore reports it as leaked when its process (this one, or the fork server it starts) is
+# killed or exits early, and removes it: a warning on the command's stderr that is not the
+# command's message. Processes started from here inherit the filter through the environment.
+_TRACKER_WARNING = "ignore:resource_tracker:UserWarning"
+
+
+def _quiet_resource_tracker() -> None:
+    current = os.environ.get("PYTHONWARNINGS", "")
+    if _TRACKER_WARNING not in current.split(","):
+        os.environ["PYTHONWARNINGS"] = ",".join(w for w in (current, _TRACKER_WARNING) if w)
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point: user errors become one line on stderr and exit status 2 (no traceback)."""
+    _quiet_resource_tracker()
     old = None
     if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
         try:

@@ -35,15 +35,12 @@ def summarize(
     for stage, g in rows.groupby("stage", sort=True):
         counts = g["status"].value_counts()
         by_stage[str(int(stage))] = {s.value: int(counts.get(s.value, 0)) for s in StageStatus}
-    # Converged rows whose sutured zone has reopened (docs/model.md, "Closure measures").
-    reopened: dict[str, int] = {}
-    if "closed" in rows:
-        ok = rows["status"] == StageStatus.CONVERGED.value
-        open_rows = rows[ok & (rows["closed"] == 0)]
-        reopened = {str(int(k)): int(v) for k, v in open_rows["stage"].value_counts().items()}
-        reopened = dict(sorted(reopened.items()))
-    closed = rows["closed"] if "closed" in rows else pd.Series(dtype=float)
-    flagged = rows[(rows["status"] == StageStatus.CONVERGED.value) & closed.notna()]
+    # The closure flag of the converged rows that have one; 0 is a reopened stage
+    # (docs/model.md, "Closure measures").
+    closed = rows["closed"] if "closed" in rows else pd.Series(float("nan"), index=rows.index)
+    flagged = closed[(rows["status"] == StageStatus.CONVERGED.value) & closed.notna()]
+    open_stages = rows.loc[flagged.index[flagged == 0], "stage"].value_counts()
+    reopened = {str(int(k)): int(v) for k, v in sorted(open_stages.items())}
     not_converged_at = {
         str(int(k)): int(v)
         for k, v in jobs["failed_stage"].dropna().value_counts().sort_index().items()
@@ -77,7 +74,7 @@ def summarize(
         "by_failure_class": by_class,
         "not_converged_at_stage": not_converged_at,
         "by_stage": by_stage,
-        "closed_rows": int((flagged["closed"] == 1).sum()) if len(flagged) else 0,
+        "closed_rows": int((flagged == 1).sum()),
         "closure_rows": int(len(flagged)),
         "reopened_by_stage": reopened,
         "attempts": int(jobs["attempts"].sum()) if len(jobs) else 0,

@@ -130,9 +130,9 @@ class ClosureLine:
         """Sum of the x-forces ``f`` (flat dofs) on the left flank's nodes per bin, per mm."""
         nodes = self.left_wound_nodes
         fx = f.reshape(-1, 3)[nodes, 0]
-        idx = np.clip(np.searchsorted(self.edges, self.X[nodes, 1], side="right") - 1, 0, None)
-        idx = np.minimum(idx, len(self.edges) - 2)
-        total = np.bincount(idx, weights=fx, minlength=len(self.edges) - 1)
+        bins = len(self.edges) - 1
+        idx = np.clip(np.searchsorted(self.edges, self.X[nodes, 1], side="right") - 1, 0, bins - 1)
+        total = np.bincount(idx, weights=fx, minlength=bins)
         return total / np.diff(self.edges)
 
     def line_loads(self, closing: np.ndarray | None, contact: np.ndarray | None) -> LineLoads:

@@ -1,0 +1,120 @@
+"""What a sutured (or Dirichlet-closed) state of a fusiform excision measures (docs/model.md,
+"Sutures"): the force in each suture, along the wound the surface gap, the contact pressure
+and the surface von Mises, and at the apices the dog-ear height.
+
+- Gap: per mirror pair of the zone at the skin surface, x_R - x_L deformed (as
+  `woundsweep.physics.closure`), at the pair's reference y.
+- Contact pressure: per contact point of the left flank p = k_V (-g) / h (kPa), the largest per
+  bin of the closure line's bins along y.
+- Surface von Mises: the cell value at `EDGE_OFFSET_mm` outside the wound's edge and below the
+  surface, at `EDGE_POINTS` positions along the left edge (reference configuration).
+- Dog-ear height: at each apex the largest rise u_z of the top surface's nodes within one wound
+  width of it, above the far field (the median u_z of the top nodes on the x faces).
+"""
+
+from __future__ import annotations
+
+from typing import Any, NamedTuple
+
+import numpy as np
+
+from ..config.fusiform import Lens
+from .closure import ClosureMeasures
+from .profiles import locate_cells
+
+__all__ = ["EDGE_OFFSET_mm", "EDGE_POINTS", "SutureState", "measure_state"]
+
+EDGE_OFFSET_mm = 0.1
+EDGE_POINTS = 61
+
+
+class SutureState(NamedTuple):
+    """One state's measures (mm, mN, kPa)."""
+
+    suture_y_mm: np.ndarray  # (n,) the sutures' y (empty before suturing)
+    suture_force_mN: np.ndarray  # (n,) each member's tension
+    closure: ClosureMeasures
+    gap_y_mm: np.ndarray  # surface pairs, sorted by y
+    gap_mm: np.ndarray
+    pressure_y_mm: np.ndarray  # bin centres
+    contact_pressure_kPa: np.ndarray  # largest per bin (0 without contact)
+    edge_y_mm: np.ndarray
+    edge_von_mises_kPa: np.ndarray
+    dog_ear_mm: tuple[float, float]  # at y = -l/2 and y = +l/2
+    max_von_mises_kPa: float
+
+    @property
+    def dog_ear_height_mm(self) -> float:
+        return float(max(self.dog_ear_mm))
+
+
+def _dog_ears(model: Any, lens: Lens, u: np.ndarray) -> tuple[float, float]:
+    d = model.domain
+    X = d.X
+    top = np.flatnonzero(np.abs(X[:, 2] - d.z_top) <= 1e-9 * d.ell)
+    uz = u.reshape(-1, 3)[:, 2]
+    far = np.intersect1d(top, d.x_face_nodes)
+    ref = float(np.median(uz[far])) if len(far) else 0.0
+    out = []
+    for y_apex in (-lens.a, lens.a):
+        r = np.hypot(X[top, 0] - lens.x_c, X[top, 1] - y_apex)
+        near = top[r <= 2 * lens.b]
+        out.append(float(uz[near].max() - ref) if len(near) else float("nan"))
+    return out[0], out[1]
+
+
+def _pressure(model: Any) -> tuple[np.ndarray, np.ndarray]:
+    line = model.closure_line
+    edges = line.edges
+    centres = 0.5 * (edges[1:] + edges[:-1])
+    c = model.contact
+    p_bins = np.zeros(len(centres))
+    if c is None or c.k_V_kPa <= 0.0:
+        return centres, p_bins
+    ps = c.passes[0]  # the left flank's points
+    gap = c.gaps(model.u)[: len(ps.nodes)]
+    depth = np.where(np.isfinite(gap), np.maximum(-gap, 0.0), 0.0)
+    p = c.k_V_kPa * depth / ps.size_mm
+    y = model.domain.X[ps.nodes, 1]
+    idx = np.clip(np.searchsorted(edges, y, side="right") - 1, 0, len(centres) - 1)
+    np.maximum.at(p_bins, idx, p)
+    return centres, p_bins
+
+
+def measure_state(model: Any, lens: Lens, members: Any | None) -> SutureState:
+    """The measures of ``model``'s current state (a `WoundModel` of a fusiform excision;
+    ``members`` the tied `SutureMembers` or None)."""
+    d = model.domain
+    u = model.u
+    line = model.closure_line
+    m = line.measure(u)
+    x = d.X[:, 0] + u.reshape(-1, 3)[:, 0]
+    pairs = line.surface
+    gy = d.X[pairs[:, 0], 1]
+    order = np.argsort(gy)
+    gap = (x[pairs[:, 1]] - x[pairs[:, 0]])[order]
+    py, pk = _pressure(model)
+    ey = np.linspace(-lens.a, lens.a, EDGE_POINTS + 2)[1:-1]
+    ex = np.array([lens.x_c - lens.half_width(y) - EDGE_OFFSET_mm for y in ey])
+    pts = np.column_stack([ex, ey, np.full_like(ey, d.z_top - EDGE_OFFSET_mm)])
+    cells = locate_cells(d, pts)
+    vm = model.forms.von_mises_cells()
+    evm = np.where(cells >= 0, vm[np.maximum(cells, 0)], np.nan)
+    if members is not None and members.active:
+        ys = np.asarray(getattr(members, "y_mm", []), dtype=float)
+        forces = members.tension(u, d.X)
+    else:
+        ys, forces = np.zeros(0), np.zeros(0)
+    return SutureState(
+        ys,
+        forces,
+        m,
+        gy[order],
+        gap,
+        py,
+        pk,
+        ey,
+        evm,
+        _dog_ears(model, lens, u),
+        float(np.nanmax(vm)),
+    )

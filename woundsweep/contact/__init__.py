@@ -4,15 +4,13 @@
 two-pass penalty on the flanks' smooth implicit surfaces (`woundsweep.contact.smooth`);
 `ContactMultipliers` carries its multipliers through Newton (the semi-smooth contact step,
 `woundsweep.contact.multipliers`); `ZoneTie` holds the closure zone's flanks together (the sutures)
-(`woundsweep.contact.tie`); `SutureMembers` are interrupted sutures as tension members
-(`woundsweep.contact.sutures`).
+(`woundsweep.contact.tie`).
 """
 
 from .geometry import orient_outward, owning_cells, split_wound_flanks
 from .multipliers import ContactMultipliers
 from .protocol import GPA_TO_KPA, ContactModel, ContactSummary
 from .smooth import FlankContact
-from .sutures import SutureMembers
 from .tie import ZoneTie
 
 __all__ = [
@@ -21,7 +19,6 @@ __all__ = [
     "ContactMultipliers",
     "ContactSummary",
     "FlankContact",
-    "SutureMembers",
     "ZoneTie",
     "orient_outward",
     "owning_cells",

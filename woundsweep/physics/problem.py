@@ -5,8 +5,7 @@ nodal force vector, ``closure_load``), the flank contact (a `woundsweep.contact.
 or None for an unwounded patch) and the closure zone's tangential tie
 (`woundsweep.contact.ZoneTie`) into the `woundsweep.solver.NonlinearProblem` protocol. The
 contact and tie terms are added while the penalty is on (``contact.k_V_kPa > 0``; the tie only
-once set); the sutures' members (``members``, `woundsweep.contact.SutureMembers`) once tied,
-their tangent with the contact's; ``multipliers`` are the contact multipliers Newton carries there. The potential is
+once set); ``multipliers`` are the contact multipliers Newton carries there. The potential is
 not used by Newton: that it exists (every load is dead) makes the tangent symmetric, and
 `tests/test_stages_contact.py` checks R = dPi/du.
 
@@ -31,7 +30,7 @@ import numpy as np
 import scipy.sparse
 from petsc4py import PETSc
 
-from ..contact import ContactModel, ContactMultipliers, SutureMembers, ZoneTie
+from ..contact import ContactModel, ContactMultipliers, ZoneTie
 from . import compat
 from .assembly import add_csr, add_vector, structure
 from .domain import WoundDomain
@@ -66,9 +65,6 @@ class WoundProblem:
         self.domain, self.forms, self.contact, self.tie = domain, forms, contact, tie
         # Dead nodal forces (mN, flat dofs) of the closure of stages 3-6; None: no such load.
         self.closure_load: np.ndarray | None = None
-        # Sutures (tension members, `physics.sutures`), once tied: their forces always, their
-        # tangent with the contact's (the sutured stages have the contact on).
-        self.members: SutureMembers | None = None
         self.A = compat.create_matrix(forms.a_form)
         self._B = compat.create_block_matrix(forms.a_form)  # None: assemble into A itself
         self._B_nnz: float | None = None  # B's entries when A last took its structure
@@ -100,8 +96,6 @@ class WoundProblem:
             add_vector(b, c.force_vector(u))
             if self.tie is not None and self.tie.active:
                 add_vector(b, self.tie.force_vector(u, c.k_V_kPa))
-        if self.members is not None and self.members.active:
-            add_vector(b, self.members.force_vector(self.solution(), self.domain.X))
 
     def jacobian(self, A: PETSc.Mat) -> None:
         c = self._contact_on()
@@ -154,10 +148,6 @@ class WoundProblem:
         c.assembly_time_s += time.perf_counter() - t0
         if self.tie is not None and self.tie.active:
             add_csr(M, self.tie.tangent_csr(c.k_V_kPa), finalize=False)
-        if self.members is not None and self.members.active:
-            K = self.members.tangent_csr(self.solution(), self.domain.X)
-            if K.nnz:
-                add_csr(M, K, finalize=False)
 
     @staticmethod
     def _structure_of(A: PETSc.Mat) -> Any:
@@ -178,8 +168,6 @@ class WoundProblem:
             parts.append(c.coupling_pattern())
             if self.tie is not None and len(self.tie):
                 parts.append(self.tie.coupling_pattern())
-            if self.members is not None:
-                parts.append(self.members.coupling_pattern())
         elif self.contact is not None:
             self.contact.clear_pattern()
         P = structure(*parts)
@@ -203,8 +191,6 @@ class WoundProblem:
             e += c.energy(self.solution())
             if self.tie is not None:
                 e += self.tie.energy(self.solution(), c.k_V_kPa)
-        if self.members is not None and self.members.active:
-            e += self.members.energy(self.solution(), self.domain.X)
         return e
 
     def min_det(self, u: np.ndarray) -> float:
@@ -226,18 +212,16 @@ class WoundProblem:
 
     def internal_force(self) -> np.ndarray:
         """Nodal internal forces at the current state (external loads and contact off)."""
-        saved, closure, members = self.forms.loads(), self.closure_load, self.members
+        saved, closure = self.forms.loads(), self.closure_load
         c = self.contact
         k_V = c.k_V_kPa if c is not None else 0.0
         self.forms.set_loads(0.0, 0.0)
         self.closure_load = None
-        self.members = None
         if c is not None:
             c.k_V_kPa = 0.0
         r = self.residual_array()
         self.forms.set_loads(*saved)
         self.closure_load = closure
-        self.members = members
         if c is not None:
             c.k_V_kPa = k_V
         return r

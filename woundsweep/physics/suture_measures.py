@@ -81,9 +81,11 @@ def _pressure(model: Any) -> tuple[np.ndarray, np.ndarray]:
     return centres, p_bins
 
 
-def measure_state(model: Any, lens: Lens, members: Any | None) -> SutureState:
-    """The measures of ``model``'s current state (a `WoundModel` of a fusiform excision;
-    ``members`` the tied `SutureMembers` or None)."""
+def measure_state(
+    model: Any, lens: Lens, suture_y_mm: np.ndarray, suture_force_mN: np.ndarray
+) -> SutureState:
+    """The measures of ``model``'s current state (a `WoundModel` of a fusiform excision) with
+    the sutures at ``suture_y_mm`` carrying ``suture_force_mN`` (empty before suturing)."""
     d = model.domain
     u = model.u
     line = model.closure_line
@@ -100,14 +102,9 @@ def measure_state(model: Any, lens: Lens, members: Any | None) -> SutureState:
     cells = locate_cells(d, pts)
     vm = model.forms.von_mises_cells()
     evm = np.where(cells >= 0, vm[np.maximum(cells, 0)], np.nan)
-    if members is not None and members.active:
-        ys = np.asarray(getattr(members, "y_mm", []), dtype=float)
-        forces = members.tension(u, d.X)
-    else:
-        ys, forces = np.zeros(0), np.zeros(0)
     return SutureState(
-        ys,
-        forces,
+        np.asarray(suture_y_mm, dtype=float),
+        np.asarray(suture_force_mN, dtype=float),
         m,
         gy[order],
         gap,

@@ -1,18 +1,22 @@
 """Closure of a fusiform excision by interrupted sutures, and a load after closure
 (docs/model.md, "Sutures" and "The load after closure").
 
-`SuturedClosure` runs, on one mesh and one set of materials:
+A suture holds the wound's walls together over its footprint: the closure zone's mirror pairs
+within half a bite width of the suture along the wound (at least the column of pairs nearest
+to it), from the surface down to the bite depth (the zone's depth, so the mesh is built with
+it). `SuturedClosure` runs, on one mesh and one set of materials:
 
-1. stage 1, pre-tension, and stage 2, the Dirichlet closure of the zone (the whole wound's
-   length, its upper walls), as `WoundModel` does (`woundsweep.physics.stages`); the zone is
-   left untied, so its nodes are contact points afterwards;
-2. `suture`: from the stage-2 state, each suture's member is tied carrying the stage-2
-   reactions of the zone nodes nearest it (along y), and the zone's Dirichlet condition is
-   released while the flank contact's penalty is ramped from 1 kPa to 1 GPa, as stage 4 does:
-   the sutures and the contact hold the wound. A placement can be re-solved from the same
+1. `close`: stage 1, pre-tension, and stage 2, the Dirichlet closure of the whole zone
+   (`woundsweep.physics.stages`);
+2. `suture`: from the stage-2 state, the zone's Dirichlet condition is released everywhere
+   but under the sutures (no contact: the walls between them may open), then the footprints
+   are tied (`woundsweep.contact.ZoneTie` on their pairs) at that state and their Dirichlet
+   condition released, while the flank contact's penalty is ramped from 1 kPa to 1 GPa as in
+   stage 4: the sutures and the contact hold the wound. The force of a suture is the tie's
+   pull across the wound on its left footprint (mN). A placement is re-solved from the same
    stage-2 state;
-3. `itch`: from a sutured state, the patch's lateral faces are held in plane and moved by
-   the load's displacement gradient E (u += E (X - X_c)), in ``steps`` equal increments, each
+3. `itch`: from the sutured state, the patch's lateral faces are held in plane and moved by the
+   load's displacement gradient E (u += E (X - X_c)) in ``steps`` equal increments, each
    measured.
 
 Every state is measured by `woundsweep.physics.suture_measures`.
@@ -30,29 +34,17 @@ from ..config.fusiform import Lens
 from ..config.paper import ClosureZone, StageSettings
 from ..config.solver import SolverSettings
 from ..config.sutures import ItchLoad, SuturePlan
-from ..contact import SutureMembers
+from ..contact import FlankContact, ZoneTie, split_wound_flanks
 from ..core.schema import StageStatus
 from ..solver.continuation import LoadState, continuation
-from ..solver.newton import Policy
+from ..solver.newton import NewtonSolver, Policy
 from .domain import dof_rows
 from .materials import JobMaterials
-from .profiles import locate_cells
+from .problem import WoundProblem
 from .stages import CONTACT_MAX_DECADES, CONTACT_START_kPa, WoundModel
 from .suture_measures import SutureState, measure_state
 
-__all__ = ["BITE_SAMPLES", "SolveStep", "SuturedClosure", "anchor", "loop_anchors"]
-
-# A suture is tied when the surface gap under it is at most this fraction of the wound width;
-# its rest length is adjusted at most TIE_ITERATIONS times to get there.
-TIE_GAP_PER_W = 0.005
-TIE_ITERATIONS = 12
-# Points along each anchor's path whose interpolation weights make up the anchor; the wall
-# points lie this far inside the tissue, at most WALL_FRACTION of the wall's height deep.
-BITE_SAMPLES = 4
-WALL_INSET_mm = 0.02
-WALL_FRACTION = 0.9
-# The wound's edges are first held closed (Dirichlet) over this length under each suture.
-FOOTPRINT_mm = 1.0
+__all__ = ["SolveStep", "SuturedClosure"]
 
 
 class SolveStep(NamedTuple):
@@ -64,78 +56,33 @@ class SolveStep(NamedTuple):
     state: SutureState | None
 
 
-def anchor(domain: Any, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(nodes, weights) of the mean of ``points`` (k, 3), each interpolated linearly in the
-    cell that holds it (its vertices' barycentric weights). ValueError if a point is in no
-    cell."""
-    cells = locate_cells(domain, points)
-    if np.any(cells < 0):
-        p = points[int(np.argmin(cells))]
-        raise ValueError(f"a suture's path leaves the tissue at ({p[0]:.3g}, {p[1]:.3g}, {p[2]:.3g}) mm")
-    nodes, weights = [], []
-    for p, c in zip(points, cells):
-        lam = domain.Dm_inv[c] @ (p - domain.X[domain.cell_vertices[c, 0]])
-        bary = np.clip(np.concatenate([[1.0 - lam.sum()], lam]), 0.0, None)
-        nodes.append(domain.cell_vertices[c])
-        weights.append(bary / bary.sum())
-    uniq, inv = np.unique(np.concatenate(nodes), return_inverse=True)
-    w = np.bincount(inv, weights=np.concatenate(weights))
-    return uniq, w / w.sum()
-
-
-def loop_anchors(
-    domain: Any, lens: Lens, y: float, bite_width: float, bite_depth: float
-) -> list[tuple[np.ndarray, np.ndarray]]:
-    """The four anchors of a suture at ``y`` (`woundsweep.contact.sutures.ANCHORS`): each bite
-    the upper half of the vertical path a bite width outside the edge, from the surface to
-    half the bite depth; each wall point the wall just inside the tissue from half the bite
-    depth to the bite depth (at most `WALL_FRACTION` of the wall's height there), each the
-    mean of `BITE_SAMPLES` points."""
-    z_top = domain.z_top
-    half = lens.half_width(y)
-    wall = -lens.floor_z(lens.x_c + half)  # the wall's height at y
-    depth_wall = min(bite_depth, WALL_FRACTION * wall)
-    t = (np.arange(BITE_SAMPLES) + 0.5) / BITE_SAMPLES
-    z_bite = z_top - 0.5 * bite_depth * t
-    z_wall = z_top - depth_wall * (0.5 + 0.5 * t)
-    out = []
-    for x, z in (
-        (lens.x_c - half - bite_width, z_bite),
-        (lens.x_c - half - WALL_INSET_mm, z_wall),
-        (lens.x_c + half + WALL_INSET_mm, z_wall),
-        (lens.x_c + half + bite_width, z_bite),
-    ):
-        pts = np.column_stack([np.full_like(z, x), np.full_like(z, y), z])
-        out.append(anchor(domain, pts))
-    return out
-
-
 class SuturedClosure:
     """A fusiform excision's mesh closed by sutures (module docstring). ``lens``: the
-    excision's outline (`GeometrySpec.lens`); ``dermal_thickness_mm`` sets the default bite
-    depth; ``zone_depth_fraction`` the Dirichlet-closed zone's depth."""
+    excision's outline (`GeometrySpec.lens`); ``zone_depth_fraction``: the closure zone's depth
+    as a fraction of the wound's, the one the mesh was built with (the bite depth)."""
 
     def __init__(
         self,
         mesh: Any,
         lens: Lens,
-        dermal_thickness_mm: float,
-        solver: SolverSettings | None = None,
         zone_depth_fraction: float = ClosureZone.depth_fraction,
+        solver: SolverSettings | None = None,
         jit: dict[str, Any] | None = None,
     ) -> None:
+        self.solver = solver or SolverSettings()
         stages = StageSettings(ClosureZone(1.0, zone_depth_fraction))
-        self.model = WoundModel(mesh, solver, stages, jit=jit, tie_zone=False)
+        self.model = WoundModel(mesh, self.solver, stages, jit=jit, tie_zone=False)
         if self.model.contact is None or self.model.closure_line is None:
             raise ValueError("the mesh has no wound to suture")
+        d = self.model.domain
+        flanks = split_wound_flanks(d.X, d.cell_vertices, d.wound_facets(), d.x_c)
+        self.flanks = tuple(d.element.sub_triangles(f) for f in flanks)
         self.lens = lens
-        self.dermal_thickness_mm = float(dermal_thickness_mm)
         self.closed_u: np.ndarray | None = None
-        self.members: SutureMembers | None = None
+        self.sutured_u: np.ndarray | None = None
         self.positions_mm: tuple[float, ...] = ()
-        self.tied_tension_mN: np.ndarray | None = None
-        self.plan: SuturePlan | None = None
-        self.materials: JobMaterials | None = None
+        self.dirichlet_force_mN: np.ndarray | None = None
+        self._owner: np.ndarray | None = None  # per tie pair, its suture
         self.orientation_deg = 0.0
 
     @property
@@ -144,10 +91,8 @@ class SuturedClosure:
 
     def close(self, materials: JobMaterials, orientation_deg: float) -> list[SolveStep]:
         """Stages 1 and 2 (pre-tension, Dirichlet closure of the zone)."""
-        self.materials = materials
         self.orientation_deg = float(orientation_deg)
         self.model.set_materials(materials)
-        self.model.problem.members = None
         out = []
         for k in (1, 2):
             o = self.model.run_stage(k)
@@ -161,166 +106,125 @@ class SuturedClosure:
 
     # -- sutures --------------------------------------------------------------------------
 
-    def _members(self, plan: SuturePlan, ys: Sequence[float]) -> SutureMembers:
-        d = self.domain
-        lens = self.lens
-        depth = plan.depth(self.dermal_thickness_mm)
-        loops = [loop_anchors(d, lens, y, plan.bite_width_mm, depth) for y in ys]
-        k = plan.stiffness_mN_per_mm(self.dermal_thickness_mm)
-        members = SutureMembers(len(d.X), loops, k)
-        members.y_mm = np.asarray(ys, dtype=float)  # type: ignore[attr-defined]
-        return members
-
-    def footprints(self, ys: Sequence[float]) -> list[np.ndarray]:
-        """Per suture, the zone nodes (both flanks) within `FOOTPRINT_mm` / 2 of its y, and at
-        least the column of zone nodes nearest to it."""
+    def footprints(self, ys: Sequence[float], bite_width_mm: float) -> list[np.ndarray]:
+        """Per suture, the zone nodes (both flanks) nearer to it than to any other suture and
+        less than half a bite width from it along the wound, and at least the column of zone
+        nodes nearest to it."""
         d = self.domain
         nodes = d.zone_nodes
-        y = d.X[nodes, 1]
+        dist = np.abs(d.X[nodes, 1][:, None] - np.asarray(ys, dtype=float)[None, :])
+        nearest = np.argmin(dist, axis=1)
+        own = dist[np.arange(len(nodes)), nearest]
         out = []
-        for yi in ys:
-            dist = np.abs(y - yi)
-            reach = max(0.5 * FOOTPRINT_mm, float(dist.min()) * (1 + 1e-9))
-            out.append(nodes[dist <= reach])
+        for i in range(len(ys)):
+            mine = nearest == i
+            if not mine.any():
+                raise ValueError(f"the suture at y={ys[i]:g} mm has no wall nodes of its own")
+            closest = own[mine].min() * (1 + 1e-9) + 1e-12
+            out.append(nodes[mine & ((own < 0.5 * bite_width_mm) | (own <= closest))])
         return out
 
-    def _close_footprints(self, ys: Sequence[float]) -> tuple[str, int, np.ndarray]:
-        """From the stage-2 state, release the zone's Dirichlet closure everywhere but under
-        the sutures (no contact); return the status, the Newton steps and per suture the
-        reaction (mN, along x) on its left flank's footprint."""
-        model, d = self.model, self.domain
-        feet = self.footprints(ys)
-        held = np.unique(np.concatenate(feet))
-        rows = np.concatenate([d.gauge_rows(), dof_rows(held, 0)])
-        offset = model.problem.residual_array()
-        offset[rows] = 0.0
-        values = model.u[rows].copy()
-        scale = float(np.linalg.norm(model.problem.internal_force()))
-
-        def load(s: float) -> LoadState:
-            return LoadState(values, (1.0 - s) * offset)
-
-        res = continuation(model.newton, rows, load, scale, 1.0, Policy(model.settings, symmetric=True))
-        r = model.problem.residual_array()
-        left = [f[d.X[f, 0] < d.x_c] for f in feet]
-        shares = np.array([max(float(r[dof_rows(f, 0)].sum()), 0.0) for f in left])
-        return res.status, int(res.iterations), shares
+    def _rebuild(self, tie: ZoneTie) -> None:
+        """A contact, problem and Newton solver with ``tie`` (the sutures) on the model."""
+        m, d = self.model, self.domain
+        left, right = self.flanks
+        m.tie = tie
+        m.contact = FlankContact(d.X, left, right, tied=tie.pairs.ravel())
+        m.problem = WoundProblem(d, m.forms, m.contact, tie)
+        m.newton = NewtonSolver(m.problem, m.problem.A, self.solver.newton)
 
     def suture(self, plan: SuturePlan, ys: Sequence[float] | None = None) -> SolveStep:
-        """Tie the sutures of ``plan`` (at ``ys``, default the plan's positions) at the
-        stage-2 state and release the Dirichlet closure into them and the contact."""
+        """Close the wound by the sutures of ``plan`` (at ``ys``, default the plan's
+        positions) from the stage-2 state (module docstring)."""
         if self.closed_u is None:
             raise RuntimeError("close() first")
         t0 = time.perf_counter()
-        model, d, c = self.model, self.domain, self.model.contact
-        assert c is not None
+        d = self.domain
         ys = tuple(plan.positions(2 * self.lens.a) if ys is None else ys)
-        members = self._members(plan, ys)
-        self.plan, self.positions_mm, self.members = plan, ys, members
-        u = model.u
-        u[:] = self.closed_u
-        model.problem.members = None
-        c.k_V_kPa = 0.0
-        status, its0, shares = self._close_footprints(ys)
-        if status != StageStatus.CONVERGED:
-            return SolveStep(status, its0, time.perf_counter() - t0, None)
-        # A loop pulls each flank across the wound twice (over the top and through the
-        # walls): half the footprint's reaction is its tension.
-        tension = 0.5 * shares
-        members.tie(u, d.X, tension)
-        self.tied_tension_mN = tension
-        model.problem.members = members
-        model.problem.closure_load = None
-        c.clear_pattern()  # the next tangent plans the contact's pattern with the members'
-        c.mult = None
+        feet = self.footprints(ys, plan.bite_width_mm)
+        held = np.concatenate(feet)
+        owner = np.concatenate([np.full(len(f), i) for i, f in enumerate(feet)])
+        left = held[d.X[held, 0] < d.x_c]
+        right = held[d.X[held, 0] >= d.x_c]
+        tie = ZoneTie(d.X, left, right, self.flanks[0], d.x_c)
+        self._rebuild(tie)
+        self._owner = owner[np.argsort(held)][np.searchsorted(np.sort(held), tie.pairs[:, 0])]
+        self.positions_mm = ys
+        m = self.model
+        m.u[:] = self.closed_u
+        # 1. The zone released but under the sutures (Dirichlet there; no contact).
+        rows = np.concatenate([d.gauge_rows(), dof_rows(held, 0)])
+        res = self._release(rows, Policy(m.settings, symmetric=True))
+        its = int(res.iterations)
+        if res.status != StageStatus.CONVERGED:
+            return SolveStep(res.status, its, time.perf_counter() - t0, None)
+        r = m.problem.residual_array()
+        self.dirichlet_force_mN = np.bincount(
+            self._owner, weights=r[3 * tie.pairs[:, 0]], minlength=len(ys)
+        )
+        # 2. The footprints tied there, their Dirichlet condition released into the tie, and
+        # the contact ramped in (as stage 4).
+        tie.set_reference(m.u)
+        c = m.contact
+        k_from, k_to = CONTACT_START_kPa, m.contact_penalty_kPa[0]
         rows = d.gauge_rows()
-        c.k_V_kPa = 0.0
-        offset = model.problem.residual_array()  # the zone's reactions and the members' pull
-        offset[rows] = 0.0
-        values = u[rows].copy()
-        scale = float(np.linalg.norm(model.problem.internal_force()))
-        k_from, k_to = CONTACT_START_kPa, model.contact_penalty_kPa[0]
+        res = self._release(rows, Policy.contact(m.settings), (k_from, k_to))
+        its += int(res.iterations)
+        ok = res.status == StageStatus.CONVERGED
+        c.k_V_kPa = k_to
+        self.sutured_u = m.u.copy() if ok else None
+        state = self._measure() if ok else None
+        return SolveStep(res.status, its, time.perf_counter() - t0, state)
 
-        def load(s: float) -> LoadState:
+    def _release(
+        self, rows: np.ndarray, policy: Policy, penalty: tuple[float, float] | None = None
+    ) -> Any:
+        """Continuation from the current state holding ``rows`` where they are and releasing
+        the out-of-balance force of every other dof; with ``penalty`` (from, to) the contact's
+        k_V ramps geometrically over the path (contact off before, as in stage 4)."""
+        m = self.model
+        c = m.contact
+        c.k_V_kPa = 0.0
+        offset = m.problem.residual_array()
+        offset[rows] = 0.0
+        values = m.u[rows].copy()
+        scale = float(np.linalg.norm(m.problem.internal_force()))
+        if penalty is None:
+
+            def load(s: float) -> LoadState:
+                return LoadState(values, (1.0 - s) * offset)
+
+            return continuation(m.newton, rows, load, scale, 1.0, policy)
+        k_from, k_to = penalty
+
+        def ramp(s: float) -> LoadState:
             c.k_V_kPa = k_from ** (1.0 - s) * k_to**s
             return LoadState(values, (1.0 - s) * offset)
 
         decades = np.log10(k_to / k_from)
-        policy = Policy.contact(model.settings)
-        res = continuation(
-            model.newton, rows, load, scale, 0.5 / decades, policy, CONTACT_MAX_DECADES / decades
+        first, largest = 0.5 / decades, CONTACT_MAX_DECADES / decades
+        return continuation(m.newton, rows, ramp, scale, first, policy, largest)
+
+    def suture_forces(self) -> np.ndarray:
+        """Per suture, the tie's pull across the wound on its left footprint (mN; positive
+        holds the walls together)."""
+        m = self.model
+        if self._owner is None or m.tie is None or not m.tie.active:
+            return np.zeros(len(self.positions_mm))
+        f = m.tie.force_vector(m.u, m.contact.k_V_kPa)
+        return -np.bincount(
+            self._owner, weights=f[3 * m.tie.pairs[:, 0]], minlength=len(self.positions_mm)
         )
-        c.k_V_kPa = k_to
-        iterations = its0 + int(res.iterations)
-        if res.status == StageStatus.CONVERGED:
-            status, its = self._tighten(rows)
-            iterations += its
-        else:
-            status = res.status
-        ok = status == StageStatus.CONVERGED
-        state = self._measure() if ok else None
-        self.sutured_u = u.copy() if ok else None
-        return SolveStep(status, iterations, time.perf_counter() - t0, state)
-
-    def suture_gaps(self) -> np.ndarray:
-        """The surface gap (mm) at each suture's y at the current state."""
-        d, line = self.domain, self.model.closure_line
-        x = d.X[:, 0] + self.model.u.reshape(-1, 3)[:, 0]
-        pairs = line.surface
-        y = d.X[pairs[:, 0], 1]
-        order = np.argsort(y)
-        gap = (x[pairs[:, 1]] - x[pairs[:, 0]])[order]
-        return np.interp(np.asarray(self.positions_mm), y[order], gap)
-
-    def _tighten(self, rows: np.ndarray) -> tuple[str, int]:
-        """Tie each suture until the edges meet under it: shorten its rest length by the
-        surface gap there (a secant step after the first), re-solving from the current
-        state, until every gap is within `TIE_GAP_PER_W` of the width (at most
-        `TIE_ITERATIONS` times). Returns the last solve's status and the Newton steps."""
-        members, model = self.members, self.model
-        assert members is not None and members.rest is not None
-        tol = TIE_GAP_PER_W * model.closure_line.width_mm
-        slope = np.ones(len(members))  # gap closed per mm of rest length taken in
-        prev_gap = prev_rest = None
-        its = 0
-        policy = Policy.contact(model.settings)
-        for _ in range(TIE_ITERATIONS):
-            gap = self.suture_gaps()
-            if np.all(np.abs(gap) <= tol):
-                return StageStatus.CONVERGED, its
-            rest = members.rest.copy()
-            if prev_gap is not None:
-                taken = prev_rest - rest
-                closed = prev_gap - gap
-                ok = np.abs(taken) > 1e-12
-                slope[ok] = np.clip(closed[ok] / taken[ok], 0.2, 5.0)
-            new = rest - gap / slope
-            prev_gap, prev_rest = gap, rest
-            offset = model.problem.residual_array()
-            offset[rows] = 0.0
-            values = model.u[rows].copy()
-            scale = float(np.linalg.norm(model.problem.internal_force()))
-
-            def load(s: float, a: np.ndarray = rest, b: np.ndarray = new) -> LoadState:
-                members.rest = a + s * (b - a)
-                return LoadState(values, (1.0 - s) * offset)
-
-            res = continuation(model.newton, rows, load, scale, 1.0, policy)
-            its += int(res.iterations)
-            if res.status != StageStatus.CONVERGED:
-                return res.status, its
-        gap = self.suture_gaps()
-        return (StageStatus.CONVERGED if np.all(np.abs(gap) <= tol) else "not-tied"), its
 
     # -- the load after closure -----------------------------------------------------------
 
     def itch(self, load: ItchLoad, steps: int = 4) -> list[SolveStep]:
         """Apply ``load`` from the sutured state in ``steps`` equal increments of the
         lateral faces' in-plane displacement; stops at the first that does not converge."""
-        if getattr(self, "sutured_u", None) is None:
+        if self.sutured_u is None:
             raise RuntimeError("suture() first")
-        model, d = self.model, self.domain
-        u = model.u
+        m, d = self.model, self.domain
+        u = m.u
         u[:] = self.sutured_u
         E = np.asarray(load.gradient(self.orientation_deg))
         lateral = np.union1d(d.x_face_nodes, d.y_face_nodes)
@@ -328,24 +232,23 @@ class SuturedClosure:
             np.concatenate([d.gauge_rows(), dof_rows(lateral, 0), dof_rows(lateral, 1)])
         ).astype(np.int32)
         node, comp = rows // 3, rows % 3
-        rel = d.X[node, :2] - np.array([d.x_c, d.y_c])
-        disp = rel @ E.T  # E (X - X_c) at each row's node
+        disp = (d.X[node, :2] - np.array([d.x_c, d.y_c])) @ E.T  # E (X - X_c) per row's node
         inc = np.where(comp < 2, disp[np.arange(len(rows)), np.minimum(comp, 1)], 0.0)
         start = u[rows].copy()
-        policy = Policy.contact(model.settings)
+        policy = Policy.contact(m.settings)
         out: list[SolveStep] = []
         for j in range(1, steps + 1):
             t0 = time.perf_counter()
             a = u[rows].copy()
             b = start + (j / steps) * inc
-            offset = model.problem.residual_array()
+            offset = m.problem.residual_array()
             offset[rows] = 0.0
-            scale = float(np.linalg.norm(model.problem.internal_force()))
+            scale = float(np.linalg.norm(m.problem.internal_force()))
 
-            def ramp(s: float, a: np.ndarray = a, b: np.ndarray = b, off: Any = offset) -> LoadState:
+            def ramp(s: float, a: Any = a, b: Any = b, off: Any = offset) -> LoadState:
                 return LoadState(a + s * (b - a), (1.0 - s) * off)
 
-            res = continuation(model.newton, rows, ramp, scale, 1.0, policy)
+            res = continuation(m.newton, rows, ramp, scale, 1.0, policy)
             ok = res.status == StageStatus.CONVERGED
             state = self._measure() if ok else None
             out.append(SolveStep(res.status, int(res.iterations), time.perf_counter() - t0, state))
@@ -354,4 +257,6 @@ class SuturedClosure:
         return out
 
     def _measure(self) -> SutureState:
-        return measure_state(self.model, self.lens, self.members)
+        return measure_state(
+            self.model, self.lens, np.asarray(self.positions_mm, float), self.suture_forces()
+        )

@@ -115,13 +115,17 @@ class SuturedClosure:
         dist = np.abs(d.X[nodes, 1][:, None] - np.asarray(ys, dtype=float)[None, :])
         nearest = np.argmin(dist, axis=1)
         own = dist[np.arange(len(nodes)), nearest]
+        # A node as near to two sutures (within rounding) belongs to neither.
+        second = np.partition(dist, 1, axis=1)[:, 1] if len(ys) > 1 else np.inf + own
+        alone = second - own > 1e-9 * d.ell
         out = []
         for i in range(len(ys)):
-            mine = nearest == i
+            mine = (nearest == i) & alone
             if not mine.any():
                 raise ValueError(f"the suture at y={ys[i]:g} mm has no wall nodes of its own")
             closest = own[mine].min() * (1 + 1e-9) + 1e-12
-            out.append(nodes[mine & ((own < 0.5 * bite_width_mm) | (own <= closest))])
+            reach = 0.5 * bite_width_mm * (1 - 1e-9)
+            out.append(nodes[mine & ((own < reach) | (own <= closest))])
         return out
 
     def _rebuild(self, tie: ZoneTie) -> None:

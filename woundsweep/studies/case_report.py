@@ -1,0 +1,246 @@
+"""The report of one clinical case (`woundsweep case`): report.md, case.json and figures.
+
+- ``forces.png``: the force of each suture as placed, under the load after closure, at the
+  evened placement and along the Langer line;
+- ``wound.png``: along the wound, the surface gap (as sutured and at each step of the load),
+  the contact pressure and the surface von Mises beside the edge, the sutures marked.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..config.sutures import BODY_SITES
+from ..core.fsutil import atomic_write
+from ..physics.closure import CLOSED_MAX_PER_W, CLOSED_MEDIAN_PER_W
+from ..physics.suture_measures import SutureState
+from .case import ITCH_STEPS, CaseResult, best_evened
+
+__all__ = ["write_report"]
+
+
+def _forces_row(st: SutureState) -> str:
+    return ", ".join(f"{f:.0f}" for f in st.suture_force_mN)
+
+
+def _positions(st: SutureState) -> str:
+    return ", ".join(f"{y:+.1f}" for y in st.suture_y_mm)
+
+
+def _opens_first(result: CaseResult) -> tuple[float, float, float] | None:
+    """(y, gap before, gap after the first load step) of the surface point whose gap grows
+    most at the first step of the load, or None."""
+    steps = [s for s in result.itch if s.state is not None]
+    if not steps:
+        return None
+    before, after = result.sutured, steps[0].state
+    assert after is not None
+    grow = after.gap_mm - before.gap_mm
+    i = int(np.argmax(grow))
+    return float(before.gap_y_mm[i]), float(before.gap_mm[i]), float(after.gap_mm[i])
+
+
+def _summary(result: CaseResult) -> dict[str, Any]:
+    c = result.case
+    st = result.sutured
+    out: dict[str, Any] = {
+        "length_mm": c.length_mm,
+        "width_mm": c.width,
+        "angle_to_langer_deg": c.angle_deg,
+        "dermal_thickness_mm": c.dermis,
+        "subcutis_thickness_mm": c.subcutis,
+        "depth_mm": c.depth,
+        "skin_type": c.skin_type,
+        "dofs": result.dofs,
+        "element_degree": c.element_degree,
+        "mesh_size_factor": c.mesh_size_factor,
+        "time_s": result.time_s,
+        "closing_force_mN": result.closing_force_mN,
+        "suture_y_mm": st.suture_y_mm.tolist(),
+        "suture_force_mN": st.suture_force_mN.tolist(),
+        "closed": bool(st.closure.closed),
+        "gap_max_mm": st.closure.gap_max_mm,
+        "dog_ear_height_mm": st.dog_ear_height_mm,
+        "itch": [
+            None if s.state is None else {
+                "status": s.status,
+                "suture_force_mN": s.state.suture_force_mN.tolist(),
+                "gap_max_mm": s.state.closure.gap_max_mm,
+                "closed": bool(s.state.closure.closed),
+                "dog_ear_height_mm": s.state.dog_ear_height_mm,
+            }
+            for s in result.itch
+        ],
+    }  # fmt: skip
+    best = best_evened(result)
+    if best is not None:
+        out["evened_y_mm"] = best.suture_y_mm.tolist()
+        out["evened_force_mN"] = best.suture_force_mN.tolist()
+    if result.along is not None:
+        out["along_langer_force_mN"] = result.along.suture_force_mN.tolist()
+        out["along_langer_closing_force_mN"] = result.along_closing_force_mN
+        out["along_langer_dog_ear_height_mm"] = result.along.dog_ear_height_mm
+    return out
+
+
+def _figures(result: CaseResult, out: Path) -> list[str]:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from matplotlib.figure import Figure
+
+    st = result.sutured
+    fig = Figure(figsize=(7, 4), layout="constrained")
+    ax = fig.subplots()
+    n = len(st.suture_force_mN)
+    x = np.arange(n)
+    series = [("as placed", st)]
+    last = next((s.state for s in reversed(result.itch) if s.state is not None), None)
+    if last is not None:
+        series.append(("under the load", last))
+    best = best_evened(result)
+    if best is not None:
+        series.append(("evened placement", best))
+    if result.along is not None:
+        series.append(("along the Langer line", result.along))
+    width = 0.8 / len(series)
+    for k, (label, s) in enumerate(series):
+        ax.bar(x + (k - (len(series) - 1) / 2) * width, s.suture_force_mN, width, label=label)
+    ax.set_xticks(x, [f"{y:+.1f}" for y in st.suture_y_mm])
+    ax.set_xlabel("suture position along the wound, as placed (mm)")
+    ax.set_ylabel("suture force (mN)")
+    ax.legend(fontsize=8)
+    files = ["forces.png"]
+    atomic_write(out / files[0], lambda tmp: fig.savefig(tmp, dpi=110, format="png"))
+
+    fig = Figure(figsize=(7, 8), layout="constrained")
+    a1, a2, a3 = fig.subplots(3, 1, sharex=True)
+    a1.plot(st.gap_y_mm, st.gap_mm, "k.-", label="sutured")
+    for j, s in enumerate(result.itch, 1):
+        if s.state is not None:
+            a1.plot(s.state.gap_y_mm, s.state.gap_mm, ".-", lw=0.8, label=f"load {j}/{ITCH_STEPS}")
+    a1.axhline(CLOSED_MAX_PER_W * st.closure.width_mm, color="r", ls=":", lw=0.8)
+    a1.set_ylabel("surface gap (mm)")
+    a1.legend(fontsize=7)
+    a2.step(st.pressure_y_mm, st.contact_pressure_kPa, where="mid", color="k", label="sutured")
+    if last is not None:
+        a2.step(last.pressure_y_mm, last.contact_pressure_kPa, where="mid", label="under the load")
+    a2.set_ylabel("largest contact\npressure (kPa)")
+    a2.legend(fontsize=7)
+    a3.plot(st.edge_y_mm, st.edge_von_mises_kPa, "k-", label="sutured")
+    if last is not None:
+        a3.plot(last.edge_y_mm, last.edge_von_mises_kPa, label="under the load")
+    a3.set_ylabel("von Mises beside\nthe edge (kPa)")
+    a3.set_xlabel("y along the wound (mm)")
+    a3.legend(fontsize=7)
+    for ax in (a1, a2, a3):
+        for y in st.suture_y_mm:
+            ax.axvline(y, color="0.8", lw=0.6, zorder=0)
+    files.append("wound.png")
+    atomic_write(out / files[1], lambda tmp: fig.savefig(tmp, dpi=110, format="png"))
+    return files
+
+
+def write_report(result: CaseResult, out: Path, command: str) -> Path:
+    """Write report.md, case.json and the figures into ``out``; return report.md's path."""
+    out.mkdir(parents=True, exist_ok=True)
+    summary = _summary(result)
+    atomic_write(out / "case.json", lambda tmp: Path(tmp).write_text(json.dumps(summary, indent=1)))
+    figs = _figures(result, out)
+    c, st = result.case, result.sutured
+    w = st.closure.width_mm
+    lines = [
+        f"# Case: {c.length_mm:g} x {c.width:.3g} mm ellipse at {c.angle_deg:g} degrees to the Langer line",
+        "",
+        f"Command: `{command}`",
+        "",
+        f"Skin: {c.site} (dermis {c.dermis:g} mm, subcutis {c.subcutis:g} mm; "
+        f"{BODY_SITES[c.site].source if c.dermal_thickness_mm is None else 'thicknesses given'}), "
+        f"{c.skin_type} skin (Table 2). Excision {c.depth:.3g} mm deep. "
+        f"{len(st.suture_y_mm)} simple interrupted sutures, bites {c.sutures.bite_width_mm:g} mm "
+        f"from the edge, {c.sutures.depth(c.dermis):g} mm deep. Model: {result.dofs} dofs, "
+        f"P{c.element_degree}, mesh size factor {c.mesh_size_factor:g}; solved in {result.time_s:.0f} s.",
+        "",
+        "## Forces per suture",
+        "",
+        "| suture | y (mm) | force (mN) | under the load (mN) | rise |",
+        "|---|---|---|---|---|",
+    ]
+    last = next((s.state for s in reversed(result.itch) if s.state is not None), None)
+    for i, (y, f) in enumerate(zip(st.suture_y_mm, st.suture_force_mN), 1):
+        g = last.suture_force_mN[i - 1] if last is not None else float("nan")
+        lines.append(f"| {i} | {y:+.1f} | {f:.0f} | {g:.0f} | {100 * (g / f - 1):+.0f} % |")
+    lines += [
+        "",
+        f"Total {st.suture_force_mN.sum():.0f} mN (the Dirichlet closure's pull on one flank: "
+        f"{result.closing_force_mN:.0f} mN). The wound is {'closed' if st.closure.closed else 'OPEN'} "
+        f"(surface gap median {st.closure.gap_median_mm:.3f} mm, largest {st.closure.gap_max_mm:.3f} mm "
+        f"of w = {w:.2f} mm; closed means at most {100 * CLOSED_MEDIAN_PER_W:g} % and "
+        f"{100 * CLOSED_MAX_PER_W:g} % of w). Dog-ear height at the apices: "
+        f"{st.dog_ear_mm[0]:.2f} and {st.dog_ear_mm[1]:.2f} mm.",
+        "",
+        "## Where to concentrate stitches",
+        "",
+    ]
+    best = best_evened(result)
+    spread = st.suture_force_mN.max() / max(st.suture_force_mN.min(), 1e-9)
+    if best is not None:
+        sp = best.suture_force_mN.max() / max(best.suture_force_mN.min(), 1e-9)
+        dense = np.diff(best.suture_y_mm)
+        mid = 0.5 * (best.suture_y_mm[1:] + best.suture_y_mm[:-1])
+        i = int(np.argmin(dense))
+        lines += [
+            f"Concentrate stitches around y = {mid[i]:+.1f} mm (spacing {dense[i]:.1f} mm there, "
+            f"{dense.max():.1f} mm at the widest). Placed at {_positions(best)} mm, the forces "
+            f"are {_forces_row(best)} mN: largest/smallest {sp:.2f} (as placed: {spread:.2f}).",
+        ]
+    else:
+        lines += [
+            f"No re-solved placement evened the forces better (largest/smallest {spread:.2f})."
+        ]
+    lines += ["", "## When the patient moves", ""]
+    it = c.itch
+    lines.append(
+        f"Load: {it.kind} of {100 * it.strain:g} % at {it.angle_to_langer_deg:g} degrees to the "
+        f"Langer line, applied to the patch's edges in {ITCH_STEPS} steps."
+    )
+    lines.append("")
+    done = [s for s in result.itch if s.state is not None]
+    if len(done) < len(result.itch) or not done:
+        lines.append(
+            f"The load could not be followed past step {len(done)}/{ITCH_STEPS} ({result.itch[-1].status})."
+        )
+    if last is not None:
+        rise = last.suture_force_mN - st.suture_force_mN
+        k = int(np.argmax(rise))
+        lines.append(
+            f"The suture at y = {st.suture_y_mm[k]:+.1f} mm gains most: {st.suture_force_mN[k]:.0f} -> "
+            f"{last.suture_force_mN[k]:.0f} mN. The wound is "
+            f"{'closed' if last.closure.closed else 'no longer closed: it REOPENS'} "
+            f"(largest surface gap {last.closure.gap_max_mm:.3f} mm; dog-ears {last.dog_ear_height_mm:.2f} mm)."
+        )
+        first = _opens_first(result)
+        if first is not None:
+            lines.append(
+                f"The flanks open first at y = {first[0]:+.2f} mm (gap {first[1]:.3f} -> {first[2]:.3f} mm "
+                "at the first step)."
+            )
+    if result.along is not None:
+        al = result.along
+        lines += [
+            "",
+            "## The same wound along the Langer line",
+            "",
+            f"Forces {_forces_row(al)} mN (total {al.suture_force_mN.sum():.0f}, here "
+            f"{st.suture_force_mN.sum():.0f}); Dirichlet closing pull {result.along_closing_force_mN:.0f} mN "
+            f"(here {result.closing_force_mN:.0f}); dog-ears {al.dog_ear_height_mm:.2f} mm "
+            f"(here {st.dog_ear_height_mm:.2f}).",
+        ]
+    lines += ["", "## Figures", ""] + [f"![{f}]({f})" for f in figs] + [""]
+    path = out / "report.md"
+    atomic_write(path, lambda tmp: Path(tmp).write_text("\n".join(lines)))
+    return path

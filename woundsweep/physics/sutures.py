@@ -44,7 +44,12 @@ from .problem import WoundProblem
 from .stages import CONTACT_MAX_DECADES, CONTACT_START_kPa, WoundModel
 from .suture_measures import SutureState, measure_state
 
-__all__ = ["SolveStep", "SuturedClosure"]
+__all__ = ["EQUAL_mm", "SolveStep", "SuturedClosure"]
+
+# A wall node whose distances along the wound to its two nearest sutures differ by less than
+# this is halfway between them and held by neither (a placement symmetric up to rounding
+# stays symmetric).
+EQUAL_mm = 1e-3
 
 
 class SolveStep(NamedTuple):
@@ -115,9 +120,9 @@ class SuturedClosure:
         dist = np.abs(d.X[nodes, 1][:, None] - np.asarray(ys, dtype=float)[None, :])
         nearest = np.argmin(dist, axis=1)
         own = dist[np.arange(len(nodes)), nearest]
-        # A node as near to two sutures (within rounding) belongs to neither.
+        # A node as near to two sutures (within `EQUAL_mm`) belongs to neither.
         second = np.partition(dist, 1, axis=1)[:, 1] if len(ys) > 1 else np.inf + own
-        alone = second - own > 1e-9 * d.ell
+        alone = second - own > EQUAL_mm
         out = []
         for i in range(len(ys)):
             mine = (nearest == i) & alone

@@ -80,6 +80,10 @@ def _summary(result: CaseResult) -> dict[str, Any]:
     if best is not None:
         out["evened_y_mm"] = best.suture_y_mm.tolist()
         out["evened_force_mN"] = best.suture_force_mN.tolist()
+    out["evened_rounds"] = [
+        {"suture_y_mm": s.suture_y_mm.tolist(), "suture_force_mN": s.suture_force_mN.tolist()}
+        for s in result.evened
+    ]
     if result.along is not None:
         out["along_langer_force_mN"] = result.along.suture_force_mN.tolist()
         out["along_langer_closing_force_mN"] = result.along_closing_force_mN

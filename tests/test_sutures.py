@@ -198,3 +198,19 @@ def test_the_load_after_closure_raises_every_suture_force(closure) -> None:
     assert [s.status for s in steps] == ["converged", "converged"]
     f1, f2 = (s.state.suture_force_mN for s in steps)
     assert np.all(f1 > before) and np.all(f2 > f1)
+
+
+@pytest.mark.fem
+def test_shares_blend_halfway_between_sutures() -> None:
+    from woundsweep.physics.sutures import BLEND_mm, SuturedClosure
+
+    ys = (-3.0, 0.0, 3.0)
+    y = np.array([-3.0, -1.5, -1.5 + BLEND_mm / 4, -1.5 + BLEND_mm, 0.2, 4.0])
+    W = SuturedClosure.shares(y, ys)
+    assert W.sum(axis=1) == pytest.approx(np.ones(len(y)))
+    assert W[0] == pytest.approx([1, 0, 0])
+    assert W[1] == pytest.approx([0.5, 0.5, 0])  # halfway: half each
+    # A quarter of the band past halfway: |y - y_j| - |y - y_i| = BLEND / 2, so 3/4 for i.
+    assert W[2] == pytest.approx([0.25, 0.75, 0])
+    assert W[3] == pytest.approx([0, 1, 0])
+    assert W[4] == pytest.approx([0, 1, 0]) and W[5] == pytest.approx([0, 0, 1])

@@ -13,8 +13,9 @@ it). `SuturedClosure` runs, on one mesh and one set of materials:
    are tied (`woundsweep.contact.ZoneTie` on their pairs) at that state and their Dirichlet
    condition released, while the flank contact's penalty is ramped from 1 kPa to 1 GPa as in
    stage 4: the sutures and the contact hold the wound. The force of a suture is the tie's
-   pull across the wound on its left footprint (mN). A placement is re-solved from the same
-   stage-2 state;
+   pull across the wound on the left wall's held points, each counted for its nearest suture
+   (blended into the next one's over `BLEND_mm` about halfway, `shares`) (mN). A placement
+   is re-solved from the same stage-2 state;
 3. `itch`: from the sutured state, the patch's lateral faces are held in plane and moved by the
    load's displacement gradient E (u += E (X - X_c)) in ``steps`` equal increments, each
    measured.
@@ -44,12 +45,12 @@ from .problem import WoundProblem
 from .stages import CONTACT_MAX_DECADES, CONTACT_START_kPa, WoundModel
 from .suture_measures import SutureState, measure_state
 
-__all__ = ["EQUAL_mm", "SolveStep", "SuturedClosure"]
+__all__ = ["BLEND_mm", "SolveStep", "SuturedClosure"]
 
-# A wall node whose distances along the wound to its two nearest sutures differ by less than
-# this is halfway between them and held by neither (a placement symmetric up to rounding
-# stays symmetric).
-EQUAL_mm = 1e-3
+# A held wall point's pull counts for its nearest suture, blended linearly into the next one's
+# over this length about the point halfway between them (so the split of the load between
+# neighbours does not jump with the mesh's nodes, nor with rounding in a symmetric placement).
+BLEND_mm = 0.5
 
 
 class SolveStep(NamedTuple):
@@ -87,7 +88,7 @@ class SuturedClosure:
         self.sutured_u: np.ndarray | None = None
         self.positions_mm: tuple[float, ...] = ()
         self.dirichlet_force_mN: np.ndarray | None = None
-        self._owner: np.ndarray | None = None  # per tie pair, its suture
+        self._shares: np.ndarray | None = None  # (tie pairs, sutures): `shares`
         self.orientation_deg = 0.0
 
     @property
@@ -111,27 +112,46 @@ class SuturedClosure:
 
     # -- sutures --------------------------------------------------------------------------
 
-    def footprints(self, ys: Sequence[float], bite_width_mm: float) -> list[np.ndarray]:
-        """Per suture, the zone nodes (both flanks) nearer to it than to any other suture and
-        less than half a bite width from it along the wound, and at least the column of zone
-        nodes nearest to it."""
+    def footprints(self, ys: Sequence[float], bite_width_mm: float) -> np.ndarray:
+        """The zone nodes (both flanks) the sutures hold: those less than half a bite width
+        from their nearest suture along the wound, and for each suture at least the column
+        of zone nodes nearest to it (ValueError if a suture is nearest to no node)."""
         d = self.domain
         nodes = d.zone_nodes
         dist = np.abs(d.X[nodes, 1][:, None] - np.asarray(ys, dtype=float)[None, :])
         nearest = np.argmin(dist, axis=1)
         own = dist[np.arange(len(nodes)), nearest]
-        # A node as near to two sutures (within `EQUAL_mm`) belongs to neither.
-        second = np.partition(dist, 1, axis=1)[:, 1] if len(ys) > 1 else np.inf + own
-        alone = second - own > EQUAL_mm
-        out = []
+        held = own < 0.5 * bite_width_mm
         for i in range(len(ys)):
-            mine = (nearest == i) & alone
+            mine = nearest == i
             if not mine.any():
                 raise ValueError(f"the suture at y={ys[i]:g} mm has no wall nodes of its own")
-            closest = own[mine].min() * (1 + 1e-9) + 1e-12
-            reach = 0.5 * bite_width_mm * (1 - 1e-9)
-            out.append(nodes[mine & ((own < reach) | (own <= closest))])
-        return out
+            held |= mine & (own <= own[mine].min() * (1 + 1e-9) + 1e-12)
+        return nodes[held]
+
+    @staticmethod
+    def shares(y: np.ndarray, ys: Sequence[float]) -> np.ndarray:
+        """(len(y), n) weights of the sutures at ``ys`` in the pull of wall points at ``y``:
+        the nearest suture's, blended linearly into its neighbour's over `BLEND_mm` about
+        the point halfway between them, 1/2 each there; each row sums to 1."""
+        ys_arr = np.asarray(ys, dtype=float)
+        n = len(ys_arr)
+        W = np.zeros((len(y), n))
+        dist = np.abs(np.asarray(y)[:, None] - ys_arr[None, :])
+        order = np.argsort(dist, axis=1)
+        i = order[:, 0]
+        rows = np.arange(len(y))
+        if n == 1:
+            W[rows, i] = 1.0
+            return W
+        j = order[:, 1]
+        # |y - y_j| - |y - y_i| is twice the distance from halfway, toward i.
+        delta = 0.5 * (dist[rows, j] - dist[rows, i])
+        adjacent = np.abs(i - j) == 1
+        wi = np.where(adjacent, np.clip(0.5 + delta / BLEND_mm, 0.5, 1.0), 1.0)
+        W[rows, i] = wi
+        W[rows, j] += 1.0 - wi
+        return W
 
     def _rebuild(self, tie: ZoneTie) -> None:
         """A contact, problem and Newton solver with ``tie`` (the sutures) on the model."""
@@ -150,14 +170,12 @@ class SuturedClosure:
         t0 = time.perf_counter()
         d = self.domain
         ys = tuple(plan.positions(2 * self.lens.a) if ys is None else ys)
-        feet = self.footprints(ys, plan.bite_width_mm)
-        held = np.concatenate(feet)
-        owner = np.concatenate([np.full(len(f), i) for i, f in enumerate(feet)])
+        held = self.footprints(ys, plan.bite_width_mm)
         left = held[d.X[held, 0] < d.x_c]
         right = held[d.X[held, 0] >= d.x_c]
         tie = ZoneTie(d.X, left, right, self.flanks[0], d.x_c)
         self._rebuild(tie)
-        self._owner = owner[np.argsort(held)][np.searchsorted(np.sort(held), tie.pairs[:, 0])]
+        self._shares = self.shares(d.X[tie.pairs[:, 0], 1], ys)
         self.positions_mm = ys
         m = self.model
         m.u[:] = self.closed_u
@@ -168,9 +186,7 @@ class SuturedClosure:
         if res.status != StageStatus.CONVERGED:
             return SolveStep(res.status, its, time.perf_counter() - t0, None)
         r = m.problem.residual_array()
-        self.dirichlet_force_mN = np.bincount(
-            self._owner, weights=r[3 * tie.pairs[:, 0]], minlength=len(ys)
-        )
+        self.dirichlet_force_mN = r[3 * tie.pairs[:, 0]] @ self._shares
         # 2. The footprints tied there, their Dirichlet condition released into the tie, and
         # the contact ramped in (as stage 4).
         tie.set_reference(m.u)
@@ -218,12 +234,10 @@ class SuturedClosure:
         """Per suture, the tie's pull across the wound on its left footprint (mN; positive
         holds the walls together)."""
         m = self.model
-        if self._owner is None or m.tie is None or not m.tie.active:
+        if self._shares is None or m.tie is None or not m.tie.active:
             return np.zeros(len(self.positions_mm))
         f = m.tie.force_vector(m.u, m.contact.k_V_kPa)
-        return -np.bincount(
-            self._owner, weights=f[3 * m.tie.pairs[:, 0]], minlength=len(self.positions_mm)
-        )
+        return -(f[3 * m.tie.pairs[:, 0]] @ self._shares)
 
     # -- the load after closure -----------------------------------------------------------
 

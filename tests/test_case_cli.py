@@ -18,7 +18,7 @@ SMALL = [
 @pytest.mark.fem
 def test_case_writes_its_report(tmp_path: Path) -> None:
     out = tmp_path / "report"
-    res = ws("case", "--out", str(out), *SMALL, timeout=300)
+    res = ws("case", "--out", str(out), *SMALL, "--converge", timeout=300)
     assert res.returncode == 0, res.stderr
     for name in ("report.md", "case.json", "forces.png", "wound.png"):
         assert (out / name).stat().st_size > 0, name
@@ -35,4 +35,9 @@ def test_case_writes_its_report(tmp_path: Path) -> None:
     report = (out / "report.md").read_text()
     assert "## Forces per suture" in report and "## When the patient moves" in report
     assert "## The same wound along the Langer line" in report
+    # Three meshes, each finer than the last.
+    levels = data["mesh_levels"]
+    assert [lv["mesh_size_factor"] for lv in levels] == pytest.approx([0.3, 0.45, 0.675])
+    assert levels[0]["dofs"] < levels[1]["dofs"] < levels[2]["dofs"]
+    assert "## Mesh convergence" in report
     assert res.stdout.rstrip().endswith(f"wrote {out / 'report.md'}")

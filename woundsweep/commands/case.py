@@ -123,11 +123,17 @@ _ITCH = ItchLoad()
 )
 @click.option("--no-even", is_flag=True, help="Skip the evened placement.")
 @click.option("--no-compare", is_flag=True, help="Skip the same wound along the Langer line.")
+@click.option(
+    "--converge",
+    is_flag=True,
+    help="Also solve the sutures on two finer meshes (mesh factor x1.5, x2.25).",
+)
 def cmd(out: Path, length_mm: float, width_mm: float | None, angle_deg: float, site: str,
         dermis_mm: float | None, subcutis_mm: float | None, depth_mm: float | None, skin: str,
         count: int | None, spacing_mm: float | None, bite_width_mm: float,
         bite_depth_mm: float | None, itch_strain: float, itch_angle_deg: float, itch_kind: str,
-        element: int, mesh_factor: float, no_even: bool, no_compare: bool) -> None:  # fmt: skip
+        element: int, mesh_factor: float, no_even: bool, no_compare: bool,
+        converge: bool) -> None:  # fmt: skip
     """Solve one clinical case and write its report (forces per suture, where to concentrate
     stitches, what a load after closure does, the wound along the Langer line)."""
     from ..config.case import ClinicalCase
@@ -149,7 +155,10 @@ def cmd(out: Path, length_mm: float, width_mm: float | None, angle_deg: float, s
     from ..studies.case import run_case
     from ..studies.case_report import write_report
 
-    result = run_case(case, echo=lambda s: click.echo(s), compare=not no_compare, even=not no_even)
+    result = run_case(
+        case, echo=lambda s: click.echo(s), compare=not no_compare, even=not no_even,
+        converge=converge,
+    )  # fmt: skip
     command = "woundsweep " + " ".join(shlex.quote(a) for a in sys.argv[1:])
     path = write_report(result, out, command)
     click.echo(path.read_text())

@@ -19,6 +19,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ..config.case import ClinicalCase
+from ..config.geometry import FINEST_FACTOR
 from ..config.solver import SolverSettings
 from ..core.errors import SolverError
 from ..core.schema import ExitCode, StageStatus
@@ -26,10 +27,29 @@ from ..physics.materials import JobMaterials
 from ..physics.suture_measures import SutureState
 from ..physics.sutures import SolveStep, SuturedClosure
 
-__all__ = ["EVEN_ROUNDS", "ITCH_STEPS", "CaseResult", "even_positions", "run_case"]
+__all__ = [
+    "CONVERGE_RATIO",
+    "EVEN_ROUNDS",
+    "ITCH_STEPS",
+    "CaseResult",
+    "MeshLevel",
+    "even_positions",
+    "run_case",
+]
 
 EVEN_ROUNDS = 2
 ITCH_STEPS = 4
+# `--converge`: two more meshes, each this much finer (mesh size factor) than the last.
+CONVERGE_RATIO = 1.5
+
+
+class MeshLevel(NamedTuple):
+    """The sutured closure on one mesh of a convergence check."""
+
+    mesh_size_factor: float
+    dofs: int
+    suture_force_mN: np.ndarray
+    dog_ear_height_mm: float
 
 
 class CaseNotSolved(SolverError):
@@ -49,6 +69,7 @@ class CaseResult(NamedTuple):
     along: SutureState | None  # the same wound along the Langer line (None at angle 0)
     along_closing_force_mN: float | None
     time_s: float
+    levels: list[MeshLevel]  # the mesh convergence check (empty without it)
 
 
 def even_positions(
@@ -77,8 +98,10 @@ def run_case(
     echo: Callable[[str], None] = print,
     compare: bool = True,
     even: bool = True,
+    converge: bool = False,
 ) -> CaseResult:
-    """Solve ``case`` (module docstring); CaseNotSolved if a solve does not converge."""
+    """Solve ``case`` (module docstring); with ``converge`` also the sutured closure on two
+    finer meshes (`CONVERGE_RATIO`); CaseNotSolved if a solve does not converge."""
     from ..mesh.build import build_mesh
 
     t0 = time.perf_counter()
@@ -142,10 +165,41 @@ def run_case(
         echo("the same wound along the Langer line")
         _, along_force = close(0.0)
         along = suture(None, "sutures")
+    levels = [
+        MeshLevel(case.mesh_size_factor, sc.domain.n_dofs, sutured.suture_force_mN,
+                  sutured.dog_ear_height_mm)
+    ] if converge else []  # fmt: skip
+    for k in (1, 2) if converge else ():
+        m = case.mesh_size_factor * CONVERGE_RATIO**k
+        if m > FINEST_FACTOR:
+            break
+        levels.append(_level(case, m, echo))
     return CaseResult(
         case, sc.domain.n_dofs, closing, closed, sutured, itch, evened, along, along_force,
-        time.perf_counter() - t0,
+        time.perf_counter() - t0, levels,
     )  # fmt: skip
+
+
+def _level(case: ClinicalCase, m: float, echo: Callable[[str], None]) -> MeshLevel:
+    """The sutured closure of ``case`` on the mesh of factor ``m``."""
+    from ..mesh.build import build_mesh
+
+    spec = case.geometry(m)
+    sc = SuturedClosure(
+        build_mesh(spec), spec.lens(), case.zone_depth_fraction,
+        SolverSettings(element_degree=case.element_degree),
+    )  # fmt: skip
+    echo(f"mesh convergence: m = {m:.4g}, {sc.domain.n_dofs} dofs")
+    steps = sc.close(
+        JobMaterials.table2(case.skin_type, case.orientation_deg), case.orientation_deg
+    )
+    if steps[-1].status != StageStatus.CONVERGED or len(steps) < 2:
+        raise CaseNotSolved(f"m = {m:.4g}: stage {len(steps)} {steps[-1].status}")
+    st = sc.suture(case.sutures)
+    echo(f"  sutures: {st.status} ({st.newton_iterations} Newton steps, {st.time_s:.1f} s)")
+    if st.state is None:
+        raise CaseNotSolved(f"m = {m:.4g}: sutures {st.status}")
+    return MeshLevel(m, sc.domain.n_dofs, st.state.suture_force_mN, st.state.dog_ear_height_mm)
 
 
 def best_evened(result: CaseResult) -> SutureState | None:

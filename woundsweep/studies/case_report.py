@@ -44,6 +44,17 @@ def _opens_first(result: CaseResult) -> tuple[float, float, float] | None:
     return float(before.gap_y_mm[i]), float(before.gap_mm[i]), float(after.gap_mm[i])
 
 
+def _deviation(result: CaseResult) -> float:
+    """The largest relative difference of a suture force or the dog-ear height between a
+    level of the convergence check and the finest."""
+    fine = result.levels[-1]
+    dev = 0.0
+    for lv in result.levels[:-1]:
+        df = np.abs(lv.suture_force_mN / fine.suture_force_mN - 1)
+        dev = max(dev, float(df.max()), abs(lv.dog_ear_height_mm / fine.dog_ear_height_mm - 1))
+    return dev
+
+
 def _summary(result: CaseResult) -> dict[str, Any]:
     c = result.case
     st = result.sutured
@@ -84,6 +95,14 @@ def _summary(result: CaseResult) -> dict[str, Any]:
         {"suture_y_mm": s.suture_y_mm.tolist(), "suture_force_mN": s.suture_force_mN.tolist()}
         for s in result.evened
     ]
+    if len(result.levels) > 1:
+        out["mesh_levels"] = [
+            {"mesh_size_factor": lv.mesh_size_factor, "dofs": lv.dofs,
+             "suture_force_mN": lv.suture_force_mN.tolist(),
+             "dog_ear_height_mm": lv.dog_ear_height_mm}
+            for lv in result.levels
+        ]  # fmt: skip
+        out["mesh_max_deviation"] = _deviation(result)
     if result.along is not None:
         out["along_langer_force_mN"] = result.along.suture_force_mN.tolist()
         out["along_langer_closing_force_mN"] = result.along_closing_force_mN
@@ -243,6 +262,24 @@ def write_report(result: CaseResult, out: Path, command: str) -> Path:
             f"{st.suture_force_mN.sum():.0f}); Dirichlet closing pull {result.along_closing_force_mN:.0f} mN "
             f"(here {result.closing_force_mN:.0f}); dog-ears {al.dog_ear_height_mm:.2f} mm "
             f"(here {st.dog_ear_height_mm:.2f}).",
+        ]
+    if len(result.levels) > 1:
+        lines += [
+            "",
+            "## Mesh convergence",
+            "",
+            "| mesh size factor | dofs | suture forces (mN) | dog-ear (mm) |",
+            "|---|---|---|---|",
+        ]
+        for lv in result.levels:
+            forces = ", ".join(f"{f:.1f}" for f in lv.suture_force_mN)
+            lines.append(
+                f"| {lv.mesh_size_factor:.4g} | {lv.dofs} | {forces} | {lv.dog_ear_height_mm:.3f} |"
+            )
+        lines += [
+            "",
+            f"Largest difference from the finest mesh: {100 * _deviation(result):.1f} % "
+            f"({'within' if _deviation(result) <= 0.05 else 'ABOVE'} 5 %).",
         ]
     lines += ["", "## Figures", ""] + [f"![{f}]({f})" for f in figs] + [""]
     path = out / "report.md"

@@ -113,7 +113,7 @@ class SuturedClosure:
     # -- sutures --------------------------------------------------------------------------
 
     def footprints(self, ys: Sequence[float], bite_width_mm: float) -> np.ndarray:
-        """The zone nodes (both flanks) the sutures hold: those less than half a bite width
+        """The zone nodes (both flanks) the sutures hold: those at most half a bite width
         from their nearest suture along the wound, and for each suture at least the column
         of zone nodes nearest to it (ValueError if a suture is nearest to no node)."""
         d = self.domain
@@ -121,7 +121,7 @@ class SuturedClosure:
         dist = np.abs(d.X[nodes, 1][:, None] - np.asarray(ys, dtype=float)[None, :])
         nearest = np.argmin(dist, axis=1)
         own = dist[np.arange(len(nodes)), nearest]
-        held = own < 0.5 * bite_width_mm
+        held = own <= 0.5 * bite_width_mm * (1 + 1e-9)  # halfway at spacing b: held, shared
         for i in range(len(ys)):
             mine = nearest == i
             if not mine.any():

@@ -20,7 +20,7 @@ def test_case_writes_its_report(tmp_path: Path) -> None:
     out = tmp_path / "report"
     res = ws("case", "--out", str(out), *SMALL, "--converge", timeout=300)
     assert res.returncode == 0, res.stderr
-    for name in ("report.md", "case.json", "forces.png", "wound.png"):
+    for name in ("report.md", "case.json", "forces.png", "wound.png", "view.png"):
         assert (out / name).stat().st_size > 0, name
     data = json.loads((out / "case.json").read_text())
     assert data["angle_to_langer_deg"] == 25.0 and data["width_mm"] == 3.0

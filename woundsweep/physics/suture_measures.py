@@ -22,7 +22,14 @@ from ..config.fusiform import Lens
 from .closure import ClosureMeasures
 from .profiles import locate_cells
 
-__all__ = ["EDGE_OFFSET_mm", "EDGE_POINTS", "SutureState", "measure_state"]
+__all__ = [
+    "EDGE_OFFSET_mm",
+    "EDGE_POINTS",
+    "SurfacePatch",
+    "SutureState",
+    "measure_state",
+    "surface_patch",
+]
 
 EDGE_OFFSET_mm = 0.1
 EDGE_POINTS = 61
@@ -115,3 +122,45 @@ def measure_state(
         _dog_ears(model, lens, u),
         float(np.nanmax(vm)),
     )
+
+
+class SurfacePatch(NamedTuple):
+    """The deformed skin surface around the wound, for a picture (mm)."""
+
+    points: np.ndarray  # (k, 3) deformed
+    triangles: np.ndarray  # (m, 3) into points
+    rise_mm: np.ndarray  # (k,) u_z above the far field
+    sutures: np.ndarray  # (n, 2, 3) each suture's bites, deformed
+
+
+def surface_patch(
+    model: Any, lens: Lens, suture_y_mm: np.ndarray, bite_width_mm: float, reach: float = 0.8
+) -> SurfacePatch:
+    """The top surface's triangles within ``reach`` wound lengths of the wound's centre,
+    deformed, with their rise above the far field, and the sutures as segments between the
+    top nodes nearest their bites."""
+    from ..core.schema import TOP
+
+    d = model.domain
+    u = model.displacement_input()
+    pts = d.points
+    tri = d.facets[d.facet_tags == TOP]
+    centre = np.array([lens.x_c, 0.0])
+    near = np.all(np.abs(pts[tri][:, :, :2] - centre).max(axis=2) <= reach * 2 * lens.a, axis=1)
+    tri = tri[near]
+    used, inv = np.unique(tri, return_inverse=True)
+    xf = pts[used] + u[used]
+    top = np.flatnonzero(np.abs(pts[:, 2] - d.z_top) <= 1e-9 * d.ell)
+    tol = 1e-9 * d.ell
+    x = pts[top, 0]
+    far = top[(np.abs(x - x.min()) <= tol) | (np.abs(x - x.max()) <= tol)]
+    ref = float(np.median(u[far, 2])) if len(far) else 0.0
+    segs = []
+    for y in np.asarray(suture_y_mm, dtype=float):
+        half = lens.half_width(y)
+        ends = []
+        for x in (lens.x_c - half - bite_width_mm, lens.x_c + half + bite_width_mm):
+            k = top[np.argmin(np.hypot(pts[top, 0] - x, pts[top, 1] - y))]
+            ends.append(pts[k] + u[k])
+        segs.append(ends)
+    return SurfacePatch(xf, inv.reshape(-1, 3), u[used, 2] - ref, np.array(segs).reshape(-1, 2, 3))

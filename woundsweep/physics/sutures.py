@@ -43,7 +43,7 @@ from .domain import dof_rows
 from .materials import JobMaterials
 from .problem import WoundProblem
 from .stages import CONTACT_MAX_DECADES, CONTACT_START_kPa, WoundModel
-from .suture_measures import SutureState, measure_state
+from .suture_measures import SurfacePatch, SutureState, measure_state, surface_patch
 
 __all__ = ["BLEND_mm", "SolveStep", "SuturedClosure"]
 
@@ -238,6 +238,12 @@ class SuturedClosure:
             return np.zeros(len(self.positions_mm))
         f = m.tie.force_vector(m.u, m.contact.k_V_kPa)
         return -(f[3 * m.tie.pairs[:, 0]] @ self._shares)
+
+    def surface(self, bite_width_mm: float) -> SurfacePatch:
+        """The deformed skin surface around the wound at the current state, with the
+        sutures (`surface_patch`)."""
+        ys = np.asarray(self.positions_mm, dtype=float)
+        return surface_patch(self.model, self.lens, ys, bite_width_mm)
 
     # -- the load after closure -----------------------------------------------------------
 

@@ -24,7 +24,7 @@ from ..config.solver import SolverSettings
 from ..core.errors import SolverError
 from ..core.schema import ExitCode, StageStatus
 from ..physics.materials import JobMaterials
-from ..physics.suture_measures import SutureState
+from ..physics.suture_measures import SurfacePatch, SutureState
 from ..physics.sutures import SolveStep, SuturedClosure
 
 __all__ = [
@@ -70,6 +70,7 @@ class CaseResult(NamedTuple):
     along_closing_force_mN: float | None
     time_s: float
     levels: list[MeshLevel]  # the mesh convergence check (empty without it)
+    surface: SurfacePatch  # the sutured skin surface around the wound
 
 
 def even_positions(
@@ -138,6 +139,7 @@ def run_case(
     echo(f"closure at {case.angle_deg:g} degrees to the Langer line")
     closed, closing = close(case.angle_deg)
     sutured = suture(None, "sutures")
+    surface = sc.surface(case.sutures.bite_width_mm)
     echo(
         f"load after closure: {case.itch.kind} {case.itch.strain:g} at {case.itch.angle_to_langer_deg:g} degrees"
     )
@@ -176,7 +178,7 @@ def run_case(
         levels.append(_level(case, m, echo))
     return CaseResult(
         case, sc.domain.n_dofs, closing, closed, sutured, itch, evened, along, along_force,
-        time.perf_counter() - t0, levels,
+        time.perf_counter() - t0, levels, surface,
     )  # fmt: skip
 
 

@@ -2,6 +2,7 @@
 
 - ``forces.png``: the force of each suture as placed, under the load after closure, at the
   evened placement and along the Langer line;
+- ``view.png``: the sutured skin surface around the wound in 3D, the sutures drawn;
 - ``wound.png``: along the wound, the surface gap (as sutured and at each step of the load),
   the contact pressure and the surface von Mises beside the edge, the sutures marked.
 """
@@ -20,7 +21,9 @@ from ..physics.closure import CLOSED_MAX_PER_W, CLOSED_MEDIAN_PER_W
 from ..physics.suture_measures import SutureState
 from .case import ITCH_STEPS, CaseResult, best_evened
 
-__all__ = ["write_report"]
+__all__ = ["VIEW_Z_SCALE", "write_report"]
+
+VIEW_Z_SCALE = 3.0
 
 
 def _forces_row(st: SutureState) -> str:
@@ -31,17 +34,31 @@ def _positions(st: SutureState) -> str:
     return ", ".join(f"{y:+.1f}" for y in st.suture_y_mm)
 
 
-def _opens_first(result: CaseResult) -> tuple[float, float, float] | None:
-    """(y, gap before, gap after the first load step) of the surface point whose gap grows
-    most at the first step of the load, or None."""
-    steps = [s for s in result.itch if s.state is not None]
-    if not steps:
+def _opens_first(result: CaseResult) -> tuple[int, float, float] | None:
+    """(load step, y, gap) of the first surface point closed after suturing (gap at most
+    `CLOSED_MEDIAN_PER_W` of w) whose gap passes that bound under the load: the earliest step,
+    and in it the largest gap; None if none opens."""
+    before = result.sutured
+    bound = CLOSED_MEDIAN_PER_W * before.closure.width_mm
+    closed = before.gap_mm <= bound
+    for j, step in enumerate(result.itch, 1):
+        if step.state is None:
+            return None
+        opened = closed & (step.state.gap_mm > bound)
+        if opened.any():
+            i = int(np.argmax(np.where(opened, step.state.gap_mm, -np.inf)))
+            return j, float(before.gap_y_mm[i]), float(step.state.gap_mm[i])
+    return None
+
+
+def _grows_most(result: CaseResult) -> tuple[float, float, float] | None:
+    """(y, gap before, gap at the end of the load) of the surface point whose gap grows most."""
+    last = next((s.state for s in reversed(result.itch) if s.state is not None), None)
+    if last is None:
         return None
-    before, after = result.sutured, steps[0].state
-    assert after is not None
-    grow = after.gap_mm - before.gap_mm
+    grow = last.gap_mm - result.sutured.gap_mm
     i = int(np.argmax(grow))
-    return float(before.gap_y_mm[i]), float(before.gap_mm[i]), float(after.gap_mm[i])
+    return float(last.gap_y_mm[i]), float(result.sutured.gap_mm[i]), float(last.gap_mm[i])
 
 
 def _deviation(result: CaseResult) -> float:
@@ -165,7 +182,41 @@ def _figures(result: CaseResult, out: Path) -> list[str]:
             ax.axvline(y, color="0.8", lw=0.6, zorder=0)
     files.append("wound.png")
     atomic_write(out / files[1], lambda tmp: fig.savefig(tmp, dpi=110, format="png"))
+    files.append(_view(result, out))
     return files
+
+
+def _view(result: CaseResult, out: Path) -> str:
+    """``view.png``: the sutured skin surface around the wound in 3D, coloured by its rise
+    above the far field (the dog-ears at the apices), the sutures drawn between their bites;
+    heights exaggerated `VIEW_Z_SCALE` times."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from matplotlib.figure import Figure
+
+    sp = result.surface
+    p = sp.points
+    fig = Figure(figsize=(8, 6), layout="constrained")
+    ax = fig.add_subplot(projection="3d")
+    tri = ax.plot_trisurf(
+        p[:, 0], p[:, 1], p[:, 2], triangles=sp.triangles, cmap="viridis", linewidth=0.1,
+        edgecolor=(0, 0, 0, 0.15), antialiased=True,
+    )  # fmt: skip
+    tri.set_array(sp.rise_mm[sp.triangles].mean(axis=1))
+    tri.autoscale()
+    for a, b in sp.sutures:
+        ax.plot(*np.stack([a, b]).T, color="red", lw=3, zorder=10)
+    span = np.ptp(p[:, :2], axis=0)
+    ax.set_box_aspect((span[0], span[1], VIEW_Z_SCALE * max(float(np.ptp(p[:, 2])), 1e-3)))
+    ax.set_xlabel("x (mm)")
+    ax.set_ylabel("y (mm)")
+    ax.set_zlabel("z (mm)")
+    ax.view_init(elev=30, azim=-65)
+    fig.colorbar(tri, ax=ax, shrink=0.6, label="rise above the far field (mm)")
+    ax.set_title(f"sutured (red), heights x{VIEW_Z_SCALE:g}", fontsize=9)
+    atomic_write(out / "view.png", lambda tmp: fig.savefig(tmp, dpi=110, format="png"))
+    return "view.png"
 
 
 def write_report(result: CaseResult, out: Path, command: str) -> Path:
@@ -247,10 +298,19 @@ def write_report(result: CaseResult, out: Path, command: str) -> Path:
             f"(largest surface gap {last.closure.gap_max_mm:.3f} mm; dog-ears {last.dog_ear_height_mm:.2f} mm)."
         )
         first = _opens_first(result)
+        bound = 100 * CLOSED_MEDIAN_PER_W
         if first is not None:
             lines.append(
-                f"The flanks open first at y = {first[0]:+.2f} mm (gap {first[1]:.3f} -> {first[2]:.3f} mm "
-                "at the first step)."
+                f"The closed flanks open first at y = {first[1]:+.2f} mm, at load step "
+                f"{first[0]}/{ITCH_STEPS} (gap {first[2]:.3f} mm, past {bound:g} % of w)."
+            )
+        else:
+            lines.append(f"No closed part of the wound opens past {bound:g} % of w under the load.")
+        grow = _grows_most(result)
+        if grow is not None:
+            lines.append(
+                f"The gap grows most at y = {grow[0]:+.2f} mm ({grow[1]:.3f} -> {grow[2]:.3f} mm), "
+                "where the flanks would part first."
             )
     if result.along is not None:
         al = result.along

@@ -89,6 +89,19 @@ def _check_factors(params: Mapping[str, Any]) -> str:
     return shape
 
 
+def _check_columns(meta: dict[str, Any], shape: str) -> str:
+    """``shape``, once the model has a column for each of its factors (refused even with
+    --allow-extrapolation otherwise: a model of trenches has none for the excision's length)."""
+    features = list(meta.get("features", FEATURES))
+    missing = [f for f in SHAPE_FACTORS[shape] if f not in features]
+    if missing:
+        raise AnalysisError(
+            f"the model has no column for {', '.join(missing)}: it was trained without "
+            f"{shape} wounds"
+        )
+    return shape
+
+
 def finest_mesh(meta: dict[str, Any], shape: str) -> float:
     """The largest (finest) mesh size factor of the shape's training rows."""
     span = meta["ranges"].get(shape, {}).get("mesh_size_factor")
@@ -104,14 +117,8 @@ def _check_params(
     meta: dict[str, Any], params: Mapping[str, Any]
 ) -> tuple[dict[str, float], list[str]]:
     """Encode one parameter set; list what lies outside the training data."""
-    shape = _check_factors(params)
+    shape = _check_columns(meta, _check_factors(params))
     features = list(meta.get("features", FEATURES))
-    missing = [f for fs in SHAPE_FACTORS.values() for f in fs if f not in features]
-    if any(f in SHAPE_FACTORS[shape] for f in missing):
-        raise AnalysisError(  # refused even with --allow-extrapolation: no column for it
-            f"the model has no column for {', '.join(missing)}: it was trained without "
-            f"{shape} wounds"
-        )
     skins = meta["skin_codes_c_kPa"]
     if params["skin_type"] not in skins:
         raise AnalysisError(
@@ -216,7 +223,7 @@ def predict_wound(
     if not 0.0 < float(level) < 1.0:
         raise AnalysisError(f"interval level {level}: expected a value between 0 and 1")
     meta = model.meta
-    shape = _check_factors(params)
+    shape = _check_columns(meta, _check_factors(params))
     params = dict(params)
     default_mesh = params.get("mesh_size_factor") is None
     if default_mesh:

@@ -185,7 +185,7 @@ def cmd(
         return
     click.echo(f"model: {loaded.path} ({scheme_name} split, {q} quantiles)")
     angle = params["orientation_deg"]
-    how = "the finest trained (none given)" if answer.mesh_size_default else "given"
+    how = "the finest trained, none given" if answer.mesh_size_default else "given"
     click.echo(
         f"orientation_deg {angle:g} (angle to the Langer line {90 - angle:g} deg); "
         f"mesh_size_factor {answer.mesh_size_factor:g} ({how})"

@@ -156,12 +156,12 @@ def cmd(
     from ..analysis import load_model, predict_wound
     from ..core.errors import AnalysisError
 
+    params = parse_params(shape, skin_type, numeric, angle_to_langer)
     try:
         loaded = load_model(model, scheme)
         q, scheme_name = int(loaded.meta["quantiles"]), str(loaded.meta["scheme"])
     except (AttributeError, TypeError, KeyError, ValueError) as err:  # e.g. metadata `null`
         raise AnalysisError(f"{model}: malformed model metadata ({type(err).__name__})") from None
-    params = parse_params(shape, skin_type, numeric, angle_to_langer)
     _warn_if_stale(loaded)
     answer = predict_wound(loaded, params, list(stages) or None, allow_extrapolation, level)
     preds = answer.stages

@@ -205,3 +205,29 @@ def test_a_trench_model_refuses_an_excision(tmp_path: Path, run_main) -> None:
     assert meta["features"] == list(FEATURES)
     rc, _, err = run_main("predict", rd, *args(angle_to_langer="30"), "--allow-extrapolation")
     assert_refused(rc, err, "trained without fusiform wounds")
+
+
+@pytest.mark.parametrize(
+    ("path", "jobs", "geometries", "angles"),
+    [
+        ("sweeps/fusiform.yaml", 252, 12, list(range(0, 91, 15))),
+        ("tests/data/fusiform-small.yaml", 144, 12, [0, 30, 60, 90]),
+    ],
+)
+def test_the_fusiform_sweeps_expand_as_their_headers_say(
+    path: str, jobs: int, geometries: int, angles: list[int]
+) -> None:
+    from cli_run import ROOT
+
+    from woundsweep.config.manifest import expand
+    from woundsweep.config.sweep import load_sweep
+
+    sweep = load_sweep(ROOT / path)
+    m = expand(sweep)
+    assert len(m) == jobs and m["geometry_id"].nunique() == geometries
+    assert sorted(m["orientation_deg"].unique()) == angles
+    assert set(m["skin_type"]) == {"normal", "stiff", "soft"}
+    assert sorted(m["wound_length_factor"].unique()) == [2.5, 3.0, 4.0]
+    # The far field: a margin of at least 2.7 excision lengths around every excision.
+    assert (m["patch_half_length_mm"] / m["wound_length_mm"]).min() >= 2.7
+    assert f"{jobs} jobs" in (ROOT / path).read_text()

@@ -172,8 +172,13 @@ def run_analysis(
     if surrogate is not None:
         files += save_companions(out, surrogate, failure)
     say("writing figures...")
-    figs = figures.write_all(out, fits, stress, rows["stage"].to_numpy(), pairs, svs, locs)
-    figs += figures.save(profile_max_locations(pos), out, "max_location_profiles")
+    # The closure zone's ends along the wound (Figure 2) are common to the trenches only: an
+    # excision's zone and patch scale with its length.
+    excisions = bool((rows["wound_shape"].astype(str) == "fusiform").any())
+    zone_ends = None if excisions else (1 / 3, 2 / 3)
+    stage = rows["stage"].to_numpy()
+    figs = figures.write_all(out, fits, stress, stage, pairs, svs, locs, zone_ends)
+    figs += figures.save(profile_max_locations(pos, zone_ends), out, "max_location_profiles")
     ratios, _ = matched_ratios(rows)
     if not ratios.empty:
         figs += figures.save(mesh_ratio_figure(ratios), out, "mesh_sensitivity")

@@ -316,5 +316,5 @@ def _failure(model: LoadedModel, values: Mapping[str, float]) -> tuple[float | N
     from .failure import predict_failure
 
     columns = list(booster.feature_names or meta["features"])
-    X = np.array([[values[f] for f in columns]], dtype=np.float64)
+    X = np.array([[values.get(f, np.nan) for f in columns]], dtype=np.float64)
     return float(predict_failure(booster, X, nthread=1)[0]), meta["statement"]

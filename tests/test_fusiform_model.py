@@ -231,3 +231,26 @@ def test_the_fusiform_sweeps_expand_as_their_headers_say(
     # The far field: a margin of at least 2.7 excision lengths around every excision.
     assert (m["patch_half_length_mm"] / m["wound_length_mm"]).min() >= 2.7
     assert f"{jobs} jobs" in (ROOT / path).read_text()
+
+
+def test_positions_along_the_excision_are_scaled_by_its_patch() -> None:
+    from woundsweep.analysis.paper import normalised_locations
+
+    # A trench (L = 10) and an excision (L = 10, l = 8: its patch spans y in [-14, 14]), both
+    # with the maximum at y = 7, x = w/2 + 5, z = -1.
+    rows = pd.DataFrame(
+        {
+            "patch_half_length_mm": [10.0, 10.0],
+            "wound_width_mm": [2.0, 2.0],
+            "wound_length_mm": [np.nan, 8.0],
+            "total_thickness_mm": [4.0, 4.0],
+            "stage": [2, 2],
+            "max_location_x_mm": [6.0, 6.0],
+            "max_location_y_mm": [7.0, 7.0],
+            "max_location_z_mm": [-1.0, -1.0],
+        }
+    )
+    locs = normalised_locations(rows)
+    assert locs["y_along"].tolist() == pytest.approx([17 / 20, 21 / 28])
+    assert locs["x_across"].tolist() == pytest.approx([5 / 11, 5 / 11])
+    assert locs["z_depth"].tolist() == pytest.approx([0.25, 0.25])

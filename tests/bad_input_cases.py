@@ -569,7 +569,24 @@ def predict_cases() -> list[Case]:
             cases.append(
                 Case(f"predict-extrapolated{opt}-{v}", _predict_extrapolated(opt, v), watch="none")
             )
+    for v in ("nan", "inf", "x", "95", "-1"):  # the angle to the Langer line: 0-90 degrees
+        cases.append(Case(f"predict--angle-to-langer-{v}", _predict_angle(v), watch="none"))
+    both = _predict_angle("30", keep_orientation=True)
+    cases.append(Case("predict-angle-and-orientation", both, watch="none", contains="exactly one"))
     return cases
+
+
+def _predict_angle(value: str, keep_orientation: bool = False) -> Callable[[Path], list[str]]:
+    """`predict` with ``--angle-to-langer value`` in place of (or beside) ``--orientation``."""
+
+    def setup(ws: Path) -> list[str]:
+        argv = _predict(None, "")(ws)
+        if not keep_orientation:
+            i = argv.index("--orientation")
+            del argv[i : i + 2]
+        return [*argv, "--angle-to-langer", value]
+
+    return setup
 
 
 def _predict_extrapolated(opt: str, value: str) -> Callable[[Path], list[str]]:

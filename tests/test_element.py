@@ -3,6 +3,8 @@ the exact homogeneous state, and a wounded P2 job through all six stages."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 from skin_patch import SKIN_TYPES, box_patch, homogeneous_field, rel_l2
@@ -160,3 +162,47 @@ def test_p2_wedge_through_all_six_stages(wedge_mesh) -> None:
     for r in records:
         assert r.result.min_J > 0 and r.result.p99_von_mises_kPa > 0
         assert r.result.dofs == m.domain.n_dofs
+
+
+def test_closed_form_stress_assembles_the_energy_s_derivatives(p2_box) -> None:
+    """The forms' residual and tangent (P = F S, S in closed form) against UFL's derivatives
+    of the strain energies (P = dW/dF), assembled at a state with both layers strained: equal
+    to rounding."""
+    import ufl
+
+    from woundsweep.core.schema import DERMIS, SUBCUTIS
+    from woundsweep.physics import compat
+    from woundsweep.physics.materials import JobMaterials
+
+    m, d = p2_box, p2_box.domain
+    mats = JobMaterials.table2("stiff", 30.0)
+    m.set_materials(mats)
+    x, y, z = d.X.T
+    m.u[:] = 0.08 * np.c_[x + 0.3 * y * z, 0.5 * y - 0.2 * x * x, -0.3 * z + 0.1 * x * y].ravel()
+    u = m.forms.u
+    v, du = ufl.TestFunction(d.V), ufl.TrialFunction(d.V)
+    F = ufl.variable(ufl.Identity(3) + ufl.grad(u))
+    dermis = dataclasses.replace(mats.dermis, a1=ufl.as_vector([float(c) for c in mats.dermis.a1]))
+    md = {"quadrature_degree": 2}
+    dx = ufl.Measure("dx", domain=d.mesh, subdomain_data=d.cell_mt, metadata=md)
+    R = sum(
+        ufl.inner(ufl.diff(W.strain_energy(F), F), ufl.grad(v)) * dx(tag)
+        for tag, W in ((DERMIS, dermis), (SUBCUTIS, mats.subcutis))
+    )
+    jit = compat.jit_options()
+    R_ref, a_ref = compat.compile_form(R, jit), compat.compile_form(ufl.derivative(R, u, du), jit)
+    vectors, matrices = [], []
+    for R_form, a_form in ((R_ref, a_ref), (m.forms.R_form, m.forms.a_form)):
+        b = compat.create_vector(R_form)
+        compat.assemble_vector(b, R_form)
+        A = compat.create_matrix(a_form)
+        compat.assemble_matrix(A, a_form)
+        vectors.append(b.getArray().copy())
+        matrices.append(A)
+    assert np.linalg.norm(vectors[0]) > 1.0  # a strained state
+    np.testing.assert_allclose(
+        vectors[1], vectors[0], rtol=0, atol=1e-12 * np.abs(vectors[0]).max()
+    )
+    diff = matrices[0].copy()
+    diff.axpy(-1.0, matrices[1])
+    assert diff.norm() <= 1e-12 * matrices[0].norm()

@@ -7,7 +7,16 @@ import pandas as pd
 import pytest
 
 from woundsweep.config.geometry import GeometrySpec
-from woundsweep.execution.shards import Shard, estimate_cost, parse_shard, partition, shard_jobs
+from woundsweep.execution.shards import (
+    COST_EXPONENT,
+    SHAPE_COST,
+    Shard,
+    estimate_cells,
+    estimate_cost,
+    parse_shard,
+    partition,
+    shard_jobs,
+)
 from woundsweep.mesh.build import build_mesh
 
 
@@ -21,12 +30,21 @@ def test_cost_estimate_ranks_real_meshes(paper: pd.DataFrame) -> None:
         ]
     )
     cells = [build_mesh(GeometrySpec.from_row(r)).info["cells"] for _, r in sample.iterrows()]
-    est = estimate_cost(sample)
+    est = estimate_cells(sample)
     rho = pd.Series(est).corr(pd.Series(cells, dtype=float), method="spearman")
     assert rho > 0.8, (rho, list(zip(est, cells)))
     # Every job of a geometry gets its geometry's estimate.
     one = paper[paper["geometry_id"] == sample["geometry_id"].iloc[0]]
     assert len(one) == 9 and len(set(estimate_cost(one))) == 1
+
+
+def test_cost_is_the_fitted_power_of_cells_times_the_shape_weight(paper: pd.DataFrame) -> None:
+    geo = paper.drop_duplicates("geometry_id").sample(40, random_state=4)
+    cells, cost = estimate_cells(geo), estimate_cost(geo)
+    weight = geo["wound_shape"].map(SHAPE_COST).to_numpy()
+    np.testing.assert_allclose(cost, cells**COST_EXPONENT * weight, rtol=5e-3)
+    # A wedge costs SHAPE_COST["wedge"] times a cylinder of as many estimated cells.
+    assert SHAPE_COST["wedge"] > SHAPE_COST["cylindrical"] == 1.0
 
 
 def test_finer_mesh_factor_costs_more(paper: pd.DataFrame) -> None:

@@ -122,3 +122,24 @@ def test_manifest_job_id_that_is_a_path_is_refused(cli: ForkCli, empty_run: Path
         assert res.code == 2 and len(lines) == 1 and "damaged manifest" in lines[0], res.stderr
         assert "job_id is not 16 hex digits" in lines[0]
     assert snapshot(empty_run.parent) == before
+
+
+def test_a_job_process_checks_its_own_row_and_the_manifest_s_shape(empty_run: Path) -> None:
+    """`load_run(rd, job)` recomputes only that job's ids (the runner checked every row):
+    an edited row 3 is refused for job 3 and by the full check, not for job 5; a structural
+    damage (an index out of order) is refused for every job."""
+    from woundsweep.config.manifest import load_run
+    from woundsweep.core.errors import StoreError
+
+    path = empty_run / "manifest.parquet"
+    m = pd.read_parquet(path)
+    m.loc[3, "orientation_deg"] = 90.0 if m.loc[3, "orientation_deg"] != 90.0 else 0.0
+    m.to_parquet(path, index=False)
+    for job in (None, 3):
+        with pytest.raises(StoreError, match="job 3: job_id is not the hash"):
+            load_run(empty_run, job)
+    assert len(load_run(empty_run, 5).manifest) == len(m)
+    m.loc[[0, 1], "job_index"] = [1, 0]
+    m.to_parquet(path, index=False)
+    with pytest.raises(StoreError, match="job_index is not"):
+        load_run(empty_run, 5)

@@ -1,7 +1,8 @@
 """The stress-quantile model of a result store (the paper's Figure 3) and its evaluation.
 
 Rows are the converged (job, stage) results with a positive maximal stress; the features
-are the adjustable parameters of Table 1 plus the stage; the target is the stress quantile
+are the adjustable parameters of Table 1 (and the fusiform excision's length factor when
+excisions are among the rows) plus the stage; the target is the stress quantile
 class. Two split schemes, ``random`` (the paper's) and ``geometry`` (no physical geometry in
 two sets), are fitted with XGBoost and evaluated side by side. Stresses are in kPa, lengths
 in mm.
@@ -26,8 +27,9 @@ from ..core.lazy import lazy_exports
 __all__, __getattr__, __dir__ = lazy_exports(
     __name__,
     {
-        "settings": ("FEATURES", "IMPORTANCE_GROUPS", "MIN_ROWS_PER_QUANTILE",
-                     "REQUIRED_COLUMNS", "SCHEMES", "SHAPE_CODES", "STRESS"),
+        "settings": ("FEATURES", "FUSIFORM_FEATURES", "IMPORTANCE_GROUPS",
+                     "MIN_ROWS_PER_QUANTILE", "REQUIRED_COLUMNS", "SCHEMES", "SHAPE_CODES",
+                     "STRESS", "model_features"),
         "data": ("encode_features", "load_results", "select_rows", "skin_codes"),
         "splits": ("Split", "assign_quantiles", "geometry_groups", "geometry_split",
                    "quantile_edges", "random_split"),

@@ -1,13 +1,14 @@
 """The analysis's rows: the run's result store, read through the store's validated reader.
 
 Rows are the converged (job, stage) results with a finite, positive `STRESS`; the model
-matrix encodes the wound shape by `SHAPE_CODES` and the skin type by its Fung ``c`` (kPa).
+matrix (`model_features` of the rows' shapes) encodes the wound shape by `SHAPE_CODES` and
+the skin type by its Fung ``c`` (kPa).
 """
 
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -17,7 +18,7 @@ import pandas as pd
 from ..core.errors import AnalysisError
 from ..core.schema import StageStatus
 from ..store.reader import read_results
-from .settings import FEATURES, REQUIRED_COLUMNS, SHAPE_CODES, STRESS
+from .settings import REQUIRED_COLUMNS, SHAPE_CODES, STRESS, model_features
 
 __all__ = [
     "drop_orphans",
@@ -142,10 +143,18 @@ def select_rows(
     return rows, counts
 
 
-def encode_features(rows: pd.DataFrame, skins: Mapping[str, float]) -> np.ndarray:
-    """The model matrix (rows x `FEATURES`), float64, NaN for factors that do not apply."""
-    X = np.empty((len(rows), len(FEATURES)), dtype=np.float64)
-    for j, name in enumerate(FEATURES):
+def encode_features(
+    rows: pd.DataFrame, skins: Mapping[str, float], features: Sequence[str] | None = None
+) -> np.ndarray:
+    """The model matrix (rows x ``features``; default `model_features` of the rows' shapes),
+    float64, NaN for factors that do not apply."""
+    if features is None:
+        features = model_features(rows["wound_shape"].astype(str))
+    X = np.empty((len(rows), len(features)), dtype=np.float64)
+    for j, name in enumerate(features):
+        if name not in rows:  # a store of trenches read before the excision existed
+            X[:, j] = np.nan
+            continue
         col = rows[name]
         if name in ("wound_shape", "skin_type"):
             codes = SHAPE_CODES if name == "wound_shape" else skins

@@ -1,6 +1,6 @@
 """The probability that a job does not converge, from the store's failure classes.
 
-One row per job of the store; the features are its parameters (`JOB_FEATURES`); the
+One row per job of the store; the features are its parameters (`job_features`); the
 target is whether its ``failure_class`` is one of `CONVERGENCE_FAILURES`. Jobs of the other
 failure classes (crashed, out-of-memory, mesh-failed, invalid) are left out. Jobs are split
 by physical geometry as the classifier's ``geometry`` scheme (train / validation for early
@@ -10,7 +10,7 @@ a split without both outcomes in training, no model is trained and the metrics s
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -27,6 +27,8 @@ from .settings import (
     FEATURES,
     JOB_FEATURES,
     MIN_FAILED_JOBS,
+    job_features,
+    model_features,
 )
 from .splits import geometry_groups, geometry_split
 from .training import dmatrix
@@ -47,15 +49,16 @@ def job_table(results: pd.DataFrame) -> pd.DataFrame:
     return results.sort_values(["job_id", "stage"]).drop_duplicates("job_id").reset_index(drop=True)
 
 
-def failure_matrix(X: np.ndarray) -> np.ndarray:
-    """The `JOB_FEATURES` columns of a `FEATURES` matrix."""
-    return X[:, [FEATURES.index(f) for f in JOB_FEATURES]]
+def failure_matrix(X: np.ndarray, features: Sequence[str] = FEATURES) -> np.ndarray:
+    """The `job_features` columns of a matrix with the columns ``features``."""
+    return X[:, [list(features).index(f) for f in job_features(features)]]
 
 
 def predict_failure(booster: Any, X: np.ndarray, nthread: int = 2) -> np.ndarray:
-    """Failure probabilities of the jobs in ``X`` (`JOB_FEATURES` columns)."""
+    """Failure probabilities of the jobs in ``X`` (the booster's columns: `job_features`)."""
+    names = list(booster.feature_names or JOB_FEATURES)
     return np.asarray(
-        booster.predict(dmatrix(X, nthread=nthread, features=JOB_FEATURES)), dtype=np.float64
+        booster.predict(dmatrix(X, nthread=nthread, features=names)), dtype=np.float64
     )
 
 
@@ -82,7 +85,9 @@ def fit_failure(
         "trained": False,
         "test": None,
     }
-    meta = {"format": FAILURE_FORMAT, "features": list(JOB_FEATURES), "failure_rate": metrics["failure_rate"],
+    features = model_features(jobs["wound_shape"].astype(str))
+    columns = job_features(features)
+    meta = {"format": FAILURE_FORMAT, "features": list(columns), "failure_rate": metrics["failure_rate"],
             "jobs": int(len(jobs)), "failed_jobs": n_fail, "woundsweep_version": __version__}  # fmt: skip
 
     def untrained(why: str) -> FailureFit:
@@ -95,7 +100,7 @@ def fit_failure(
             f"{n_fail} of {len(jobs)} jobs failed to converge and {n_ok} converged; at least "
             f"{MIN_FAILED_JOBS} of each are needed to train one"
         )
-    X = failure_matrix(encode_features(jobs, skins))
+    X = failure_matrix(encode_features(jobs, skins, features), features)
     split = geometry_split(
         geometry_groups(jobs), settings.train_fraction, settings.validation_fraction, settings.seed
     )
@@ -104,8 +109,8 @@ def fit_failure(
     nt = settings.nthread
     params = {**settings.xgb_params(), "objective": "binary:logistic", "eval_metric": "logloss"}
     del params["num_class"]
-    dtrain = dmatrix(X[split.train], failed[split.train], nt, JOB_FEATURES)
-    dval = dmatrix(X[split.validation], failed[split.validation], nt, JOB_FEATURES)
+    dtrain = dmatrix(X[split.train], failed[split.train], nt, columns)
+    dval = dmatrix(X[split.validation], failed[split.validation], nt, columns)
     booster = xgb.train(
         params, dtrain, num_boost_round=settings.n_estimators,
         evals=[(dtrain, "train"), (dval, "validation")],

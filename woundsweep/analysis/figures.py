@@ -220,8 +220,11 @@ def stiff_vs_soft(pairs: pd.DataFrame, summary: dict[str, Any]) -> Figure:
     return fig
 
 
-def max_locations(locs: pd.DataFrame) -> Figure:
-    """Figure 2: where the maximum sits along (y), across (x) and through (z) the patch."""
+def max_locations(
+    locs: pd.DataFrame, zone_ends: tuple[float, float] | None = (1 / 3, 2 / 3)
+) -> Figure:
+    """Figure 2: where the maximum sits along (y), across (x) and through (z) the patch, the
+    closure zone's ends dashed (``None``: no common ends, as for excisions)."""
     cols = (
         ("y_along", (0, 1), "along the wound: (y + L) / 2L"),
         ("x_across", (-1, 1), "across: (x - w/2) / (L + w/2)"),
@@ -236,14 +239,15 @@ def max_locations(locs: pd.DataFrame) -> Figure:
             # Clip so that a maximum found slightly outside the undeformed patch still counts.
             vals = np.clip(sel[col].to_numpy(dtype=float), *rng)
             ax.hist(vals, bins=40, range=rng, color="tab:red" if i == 1 else "tab:blue")
-            if col == "y_along":
-                for v in (1 / 3, 2 / 3):
+            if col == "y_along" and zone_ends is not None:
+                for v in zone_ends:
                     ax.axvline(v, color="grey", lw=0.8, ls="--")
             if i == len(STAGE_GROUPS) - 1:
                 ax.set_xlabel(label)
             if j == 0:
                 ax.set_ylabel(f"{group}\n(n={len(sel)})")
-    fig.suptitle("Location of the maximal von Mises stress (dashed: ends of the closure zone)")
+    dashed = " (dashed: ends of the closure zone)" if zone_ends is not None else ""
+    fig.suptitle(f"Location of the maximal von Mises stress{dashed}")
     return fig
 
 
@@ -255,8 +259,10 @@ def write_all(
     pairs: pd.DataFrame,
     stiff_soft: dict[str, Any],
     locs: pd.DataFrame,
+    zone_ends: tuple[float, float] | None = (1 / 3, 2 / 3),
 ) -> list[Path]:
-    """Write every figure of the analysis; return the paths (PNG and SVG)."""
+    """Write every figure of the analysis; return the paths (PNG and SVG). ``zone_ends``: the
+    closure zone's ends along the wound in Figure 2 (``None``: not drawn)."""
     paths: list[Path] = []
     for f in fits:
         label = f"{f.scheme} split"
@@ -283,7 +289,7 @@ def write_all(
     edges = fits[0].edges_kPa if fits else None
     paths += save(stress_distribution(stress, stage, edges), out_dir, "stress_distribution")
     paths += save(stiff_vs_soft(pairs, stiff_soft), out_dir, "stiff_vs_soft")
-    paths += save(max_locations(locs), out_dir, "max_location")
+    paths += save(max_locations(locs, zone_ends), out_dir, "max_location")
     return paths
 
 

@@ -59,8 +59,12 @@ def _schematic(ax: Any, line: str) -> None:
     ax.set_title(_TITLES[line][0] + ("\nsection y = 0" if section else "\ntop view"), fontsize=9)
 
 
-def profile_max_locations(pos: pd.DataFrame) -> Figure:
-    """Figure 2 (profile lines): histograms of the position of each line's maximum."""
+def profile_max_locations(
+    pos: pd.DataFrame, zone_ends: tuple[float, float] | None = (1 / 3, 2 / 3)
+) -> Figure:
+    """Figure 2 (profile lines): histograms of the position of each line's maximum, with the
+    closure zone's ends dashed along the wound (``None``: no common ends, as for excisions,
+    whose zone and patch scale with each one's length)."""
     fig = Figure(figsize=(10, 9), layout="constrained")
     axes = fig.subplots(
         len(STAGE_GROUPS) + 1, 3, squeeze=False, height_ratios=[0.8] + [1] * len(STAGE_GROUPS)
@@ -75,8 +79,8 @@ def profile_max_locations(pos: pd.DataFrame) -> Figure:
             ax.bar(edges[:-1], counts, np.diff(edges), align="edge",
                    color="tab:red" if i == 2 else "tab:blue")  # fmt: skip
             ax.set_xlim(edges[0], edges[-1])
-            if line == "along_wound":
-                for v in (1 / 3, 2 / 3):
+            if line == "along_wound" and zone_ends is not None:
+                for v in zone_ends:
                     ax.axvline(v, color="grey", lw=0.8, ls="--")
             if i == len(STAGE_GROUPS):
                 ax.set_xlabel(_TITLES[line][1])
@@ -86,8 +90,8 @@ def profile_max_locations(pos: pd.DataFrame) -> Figure:
             if missing:
                 ax.text(0.98, 0.95, f"{missing} rows without a position", ha="right", va="top",
                         transform=ax.transAxes, fontsize=7)  # fmt: skip
+    dashed = "; dashed: ends of the closure zone" if zone_ends is not None else ""
     fig.suptitle(
-        "Location of the maximal von Mises stress on each profile line (100 points; "
-        "dashed: ends of the closure zone)"
+        f"Location of the maximal von Mises stress on each profile line (100 points{dashed})"
     )
     return fig

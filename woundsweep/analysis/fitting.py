@@ -6,7 +6,7 @@
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -17,7 +17,7 @@ from ..config.analysis import ModelSettings
 from ..core.errors import AnalysisError
 from ..core.versions import MODEL_FORMAT
 from .evaluation import evaluate, feature_importance
-from .settings import FEATURES, SCHEMES, SHAPE_CODES, STRESS
+from .settings import FEATURES, SCHEMES, SHAPE_CODES, STRESS, model_features
 from .splits import (
     Split,
     assign_quantiles,
@@ -48,18 +48,20 @@ class SchemeFit(NamedTuple):
 
 
 def _per_shape(
-    X: np.ndarray, summarise: Callable[[np.ndarray], list[float] | None]
+    X: np.ndarray,
+    summarise: Callable[[np.ndarray], list[float] | None],
+    features: Sequence[str] = FEATURES,
 ) -> dict[str, dict[str, list[float]]]:
     """Per wound shape, ``summarise`` of each numeric feature's finite values over the rows of
-    ``X`` (a feature left out where it gives None)."""
+    ``X`` (columns ``features``; a feature left out where it gives None)."""
     out: dict[str, dict[str, list[float]]] = {}
-    shape_col = FEATURES.index("wound_shape")
+    shape_col = list(features).index("wound_shape")
     for shape, code in SHAPE_CODES.items():
         sub = X[X[:, shape_col] == code]
         if len(sub) == 0:
             continue
         out[shape] = {}
-        for j, name in enumerate(FEATURES):
+        for j, name in enumerate(features):
             if name in ("wound_shape", "skin_type", "stage"):
                 continue
             got = summarise(sub[:, j][np.isfinite(sub[:, j])])
@@ -68,12 +70,16 @@ def _per_shape(
     return out
 
 
-def feature_ranges(X: np.ndarray) -> dict[str, dict[str, list[float]]]:
+def feature_ranges(
+    X: np.ndarray, features: Sequence[str] = FEATURES
+) -> dict[str, dict[str, list[float]]]:
     """Per wound shape, [min, max] of every numeric feature over the rows of ``X``."""
-    return _per_shape(X, lambda v: [float(v.min()), float(v.max())] if len(v) else None)
+    return _per_shape(X, lambda v: [float(v.min()), float(v.max())] if len(v) else None, features)
 
 
-def feature_levels(X: np.ndarray) -> dict[str, dict[str, list[float]]]:
+def feature_levels(
+    X: np.ndarray, features: Sequence[str] = FEATURES
+) -> dict[str, dict[str, list[float]]]:
     """Per wound shape, the distinct training values of every numeric feature (the grid's
     values), or none for a feature with more than `MAX_LEVELS` of them."""
 
@@ -81,7 +87,7 @@ def feature_levels(X: np.ndarray) -> dict[str, dict[str, list[float]]]:
         u = np.unique(v)
         return u.tolist() if 0 < len(u) <= MAX_LEVELS else None
 
-    return _per_shape(X, levels)
+    return _per_shape(X, levels, features)
 
 
 def fit_scheme(
@@ -115,7 +121,8 @@ def fit_scheme(
         raise AnalysisError(
             f"{scheme} split: the test set ({len(split.test)} rows) holds {test_classes} quantile class; too few rows for the splits"
         )
-    trained = train_model(X, y, split, settings)
+    features = model_features(rows["wound_shape"].astype(str))
+    trained = train_model(X, y, split, settings, features)
     probs = {
         name: predict_proba(trained.booster, X[idx], settings.nthread)
         for name, idx in split._asdict().items()
@@ -138,14 +145,14 @@ def fit_scheme(
     meta = {
         "format": MODEL_FORMAT,
         "scheme": scheme,
-        "features": list(FEATURES),
+        "features": list(features),
         "shape_codes": dict(SHAPE_CODES),
         "skin_codes_c_kPa": {
             k: float(v) for k, v in skins.items() if k in set(train_rows["skin_type"].astype(str))
         },
         "stages": sorted(int(s) for s in train_rows["stage"].unique()),
-        "ranges": feature_ranges(X[split.train]),
-        "levels": feature_levels(X[split.train]),
+        "ranges": feature_ranges(X[split.train], features),
+        "levels": feature_levels(X[split.train], features),
         "quantiles": q,
         "quantile_edges_kPa": edges.tolist(),
         "stress": STRESS,

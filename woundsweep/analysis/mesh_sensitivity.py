@@ -1,8 +1,8 @@
 """How much the stress depends on the mesh: the mesh size factor's importance in the stress
 models, and p99 by mesh size factor for matched geometries.
 
-A matched group is the rows equal in every `FEATURES` entry but ``mesh_size_factor`` (same
-wound, skin, orientation and stage). A larger factor is a finer mesh; each group's p99 is
+A matched group is the rows equal in every model column (`model_features`) but
+``mesh_size_factor`` (same wound, skin, orientation and stage). A larger factor is a finer mesh; each group's p99 is
 compared with its p99 at the finest factor of the stage's rows, and groups without a row at
 that factor, or with no other factor, are left out (and counted).
 """
@@ -14,18 +14,24 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from .settings import FEATURES, STRESS
+from .settings import STRESS, model_features
 
 __all__ = ["MESH", "matched_ratios", "mesh_importance", "mesh_sensitivity", "report_lines"]
 
 MESH = "mesh_size_factor"
-_MATCH = [f for f in FEATURES if f not in (MESH, "stage")]
+
+
+def _match(rows: pd.DataFrame) -> list[str]:
+    """The columns a matched group agrees on: the rows' model columns but the mesh and stage."""
+    features = model_features(rows["wound_shape"].astype(str))
+    return [f for f in features if f not in (MESH, "stage")]
 
 
 def matched_ratios(rows: pd.DataFrame) -> tuple[pd.DataFrame, dict[str, Any]]:
     """Per matched group and factor: ``stage``, ``group``, ``mesh_size_factor``, ``ratio`` =
     p99 / p99 at the stage's finest factor; and per stage the groups left out and why."""
-    frame = rows[_MATCH].astype(object).where(rows[_MATCH].notna(), "n/a").astype(str)
+    match = _match(rows)
+    frame = rows[match].astype(object).where(rows[match].notna(), "n/a").astype(str)
     key = pd.MultiIndex.from_frame(frame).factorize()[0]
     df = pd.DataFrame(
         {
@@ -115,7 +121,7 @@ def mesh_sensitivity(rows: pd.DataFrame, metrics: dict[str, Any]) -> dict[str, A
         }
     return {
         "factors": sorted(float(f) for f in rows[MESH].dropna().unique()),
-        "matched_on": list(_MATCH) + ["stage"],
+        "matched_on": _match(rows) + ["stage"],
         "relative_difference": "|p99 / p99 at the stage's finest factor - 1|, coarser rows",
         "stages": stages,
         "left_out": left_out,

@@ -9,11 +9,18 @@ import pandas as pd
 
 from .settings import LOCATION_COLUMNS, STAGE_GROUPS, STRESS
 
-__all__ = ["LOCATION_NORMALISATION", "location_summary", "normalised_locations", "stiff_vs_soft"]
+__all__ = [
+    "LOCATION_NORMALISATION",
+    "along_half_length",
+    "location_summary",
+    "normalised_locations",
+    "stiff_vs_soft",
+]
 
 # How `normalised_locations` scales each coordinate (recorded in metrics.json).
 LOCATION_NORMALISATION = {
-    "y_along": "(y + L) / 2L; closure zone ends at 1/3 and 2/3",
+    "y_along": "(y + L) / 2L (L + l/2 in place of L for the excision); "
+    "closure zone ends at 1/3 and 2/3",
     "x_across": "(x - w/2) / (L + w/2); 0 = wound mid-plane, +-1 = lateral faces",
     "z_depth": "-z / T; 0 = skin surface, 1 = bottom face",
 }
@@ -53,11 +60,21 @@ def stiff_vs_soft(rows: pd.DataFrame) -> tuple[dict[str, Any], pd.DataFrame]:
     return out, pairs.reset_index(drop=True)
 
 
+def along_half_length(rows: pd.DataFrame) -> np.ndarray:
+    """Half the patch's extent along the wound (mm): L for the trenches, L + l/2 for the
+    excision (its patch reaches L beyond each apex)."""
+    L = rows["patch_half_length_mm"].to_numpy(dtype=float)
+    if "wound_length_mm" not in rows:
+        return L
+    half = rows["wound_length_mm"].to_numpy(dtype=float) / 2
+    return np.where(np.isfinite(half), L + half, L)
+
+
 def normalised_locations(rows: pd.DataFrame) -> pd.DataFrame:
     """Where the maximum sits, scaled by the patch (rows with a location only).
 
     ``y_along`` = (y + L) / 2L: 0 and 1 at the patch ends, the closure zone's ends at 1/3 and
-    2/3. ``x_across`` = (x - w/2) / (L + w/2): 0 on the wound's mid-plane, -1 and +1 at the
+    2/3 (`along_half_length`: the excision's patch reaches L beyond its apices). ``x_across`` = (x - w/2) / (L + w/2): 0 on the wound's mid-plane, -1 and +1 at the
     lateral faces. ``z_depth`` = -z / T: 0 at the skin surface, 1 at the bottom face.
     """
     loc = rows.dropna(subset=list(LOCATION_COLUMNS))
@@ -65,6 +82,7 @@ def normalised_locations(rows: pd.DataFrame) -> pd.DataFrame:
         loc[c].to_numpy(dtype=float)
         for c in ("patch_half_length_mm", "wound_width_mm", "total_thickness_mm")
     )
+    Ly = along_half_length(loc)
     stage = loc["stage"].to_numpy()
     group = np.full(len(loc), "", dtype=object)
     for name, stages in STAGE_GROUPS:
@@ -72,7 +90,7 @@ def normalised_locations(rows: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(
         {
             "stage_group": group,
-            "y_along": (loc["max_location_y_mm"].to_numpy(dtype=float) + L) / (2 * L),
+            "y_along": (loc["max_location_y_mm"].to_numpy(dtype=float) + Ly) / (2 * Ly),
             "x_across": (loc["max_location_x_mm"].to_numpy(dtype=float) - w / 2) / (L + w / 2),
             "z_depth": -loc["max_location_z_mm"].to_numpy(dtype=float) / T,
         }

@@ -38,11 +38,11 @@ from .paper import location_summary, normalised_locations, stiff_vs_soft
 from .profile_locations import profile_positions, profile_summary
 from .report import write_report
 from .settings import (
-    FEATURES,
     IMPORTANCE_GROUPS,
     MIN_ROWS_PER_QUANTILE,
     SCHEMES,
     STRESS,
+    model_features,
 )
 from .trained_on import trained_on
 
@@ -122,7 +122,8 @@ def run_analysis(
             f"{len(rows)} usable rows: at least {MIN_ROWS_PER_QUANTILE * q} are needed for {q} quantiles "
             "and the train/validation/test splits"
         )
-    X = encode_features(rows, skins)
+    features = model_features(rows["wound_shape"].astype(str))
+    X = encode_features(rows, skins, features)
     fits = []
     for s in schemes:
         say(f"training the {s} split model on {len(rows)} rows ({q} quantiles)...")
@@ -141,8 +142,10 @@ def run_analysis(
         "stress_units": "kPa",
         "element_degree": degree,
         "element": element_name(degree) if degree is not None else "unknown (no sweep)",
-        "features": list(FEATURES),
-        "importance_groups": {k: list(v) for k, v in IMPORTANCE_GROUPS.items()},
+        "features": list(features),
+        "importance_groups": {
+            k: list(v) for k, v in IMPORTANCE_GROUPS.items() if set(v) & set(features)
+        },
         "settings": dataclasses.asdict(settings),
         "trained_on": record,
         "rows": counts,
@@ -169,8 +172,13 @@ def run_analysis(
     if surrogate is not None:
         files += save_companions(out, surrogate, failure)
     say("writing figures...")
-    figs = figures.write_all(out, fits, stress, rows["stage"].to_numpy(), pairs, svs, locs)
-    figs += figures.save(profile_max_locations(pos), out, "max_location_profiles")
+    # The closure zone's ends along the wound (Figure 2) are common to the trenches only: an
+    # excision's zone and patch scale with its length.
+    excisions = bool((rows["wound_shape"].astype(str) == "fusiform").any())
+    zone_ends = None if excisions else (1 / 3, 2 / 3)
+    stage = rows["stage"].to_numpy()
+    figs = figures.write_all(out, fits, stress, stage, pairs, svs, locs, zone_ends)
+    figs += figures.save(profile_max_locations(pos, zone_ends), out, "max_location_profiles")
     ratios, _ = matched_ratios(rows)
     if not ratios.empty:
         figs += figures.save(mesh_ratio_figure(ratios), out, "mesh_sensitivity")

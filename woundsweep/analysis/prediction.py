@@ -1,10 +1,19 @@
 """One wound's answer from the saved models: the paper's stress quantile (classifier), the
 stress estimate with its conformal interval (surrogate) and the failure probability.
 
-Values outside the training ranges are refused, or answered and flagged. Values inside a
-range but between the grid's values (an orientation of 25 degrees on a 0/45/90 grid) are
-answered and flagged as interpolated: the tree models are piecewise constant between grid
-values, so such an answer is that of a neighbouring grid value's side of a split.
+Values outside the training ranges are refused, or answered and flagged.
+
+The orientation is answered continuously: at an orientation between two trained ones (25
+degrees on a 0/45/90 grid) every model is evaluated at both neighbours and the answers are
+weighted linearly in the angle (class probabilities, log stress, failure probability; the
+interval is the calibrated half-width around the weighted log stress). The tree models
+alone are piecewise constant in the angle, with their steps at the trained values, so
+their own answer between two trained angles is one neighbour's, whichever side of a split it
+falls. Other parameters between the grid's values are answered by the trees as they are
+and flagged as interpolated.
+
+Without a mesh size factor the answer is that of the finest mesh trained on for the shape
+(the largest factor), and says so.
 """
 
 from __future__ import annotations
@@ -16,14 +25,24 @@ import numpy as np
 
 from ..core.errors import AnalysisError
 from .model_io import LoadedModel
-from .settings import FEATURES, SHAPE_CODES
-from .training import predict_proba
+from .settings import FEATURES, SHAPE_CODES, SHAPE_FACTORS
+from .training import booster_features, predict_proba
 
-__all__ = ["MAX_PARAMETER", "Prediction", "WoundPrediction", "predict", "predict_wound"]
+__all__ = [
+    "ANGLE",
+    "MAX_PARAMETER",
+    "Prediction",
+    "WoundPrediction",
+    "angle_weights",
+    "predict",
+    "predict_wound",
+]
 
 # The models compute in float32: 1e308 becomes infinity there. No wound parameter (mm, factors,
 # degrees) comes near this bound.
 MAX_PARAMETER = 1e6
+# The parameter answered continuously between its trained values.
+ANGLE = "orientation_deg"
 
 
 class Prediction(NamedTuple):
@@ -43,27 +62,63 @@ class Prediction(NamedTuple):
 
 class WoundPrediction(NamedTuple):
     """Every stage's `Prediction`, the job's failure probability (``None`` without a failure
-    model, ``failure_note`` says why) and the interpolation flags."""
+    model, ``failure_note`` says why), the interpolation flags, the mesh size factor answered
+    for (``mesh_size_default``: the finest trained, none was given) and the trained
+    orientations the answer weighs (``[orientation_deg, weight]`` pairs)."""
 
     stages: list[Prediction]
     failure_probability: float | None
     failure_note: str
     interpolated: list[str]
+    mesh_size_factor: float | None = None
+    mesh_size_default: bool = False
+    orientation_weights: list[tuple[float, float]] = []
+
+
+def _check_factors(params: Mapping[str, Any]) -> str:
+    """The wound's shape, once its own factors are given and the others' are not."""
+    shape = params["wound_shape"]
+    if shape not in SHAPE_CODES:
+        raise AnalysisError(f"wound shape {shape!r}: expected one of {sorted(SHAPE_CODES)}")
+    own = SHAPE_FACTORS[shape]
+    for name in sorted({f for fs in SHAPE_FACTORS.values() for f in fs}):
+        if name in own and params.get(name) is None:
+            raise AnalysisError(f"a {shape} wound needs {name}")
+        if name not in own and params.get(name) is not None:
+            raise AnalysisError(f"{name} does not apply to a {shape} wound")
+    return shape
+
+
+def _check_columns(meta: dict[str, Any], shape: str) -> str:
+    """``shape``, once the model has a column for each of its factors (refused even with
+    --allow-extrapolation otherwise: a model of trenches has none for the excision's length)."""
+    features = list(meta.get("features", FEATURES))
+    missing = [f for f in SHAPE_FACTORS[shape] if f not in features]
+    if missing:
+        raise AnalysisError(
+            f"the model has no column for {', '.join(missing)}: it was trained without "
+            f"{shape} wounds"
+        )
+    return shape
+
+
+def finest_mesh(meta: dict[str, Any], shape: str) -> float:
+    """The largest (finest) mesh size factor of the shape's training rows."""
+    span = meta["ranges"].get(shape, {}).get("mesh_size_factor")
+    if span is None:
+        raise AnalysisError(
+            f"no {shape} wounds in the training data to take a mesh size factor from; "
+            "give --mesh-size-factor"
+        )
+    return float(span[1])
 
 
 def _check_params(
     meta: dict[str, Any], params: Mapping[str, Any]
 ) -> tuple[dict[str, float], list[str]]:
     """Encode one parameter set; list what lies outside the training data."""
-    shape = params["wound_shape"]
-    if shape not in SHAPE_CODES:
-        raise AnalysisError(f"wound shape {shape!r}: expected one of {sorted(SHAPE_CODES)}")
-    own = "wound_depth_factor" if shape == "wedge" else "wound_aspect_factor"
-    other = "wound_aspect_factor" if shape == "wedge" else "wound_depth_factor"
-    if params.get(own) is None:
-        raise AnalysisError(f"a {shape} wound needs {own}")
-    if params.get(other) is not None:
-        raise AnalysisError(f"{other} does not apply to a {shape} wound")
+    shape = _check_columns(meta, _check_factors(params))
+    features = list(meta.get("features", FEATURES))
     skins = meta["skin_codes_c_kPa"]
     if params["skin_type"] not in skins:
         raise AnalysisError(
@@ -78,7 +133,7 @@ def _check_params(
         "wound_shape": SHAPE_CODES[shape],
         "skin_type": float(skins[params["skin_type"]]),
     }
-    for name in FEATURES:
+    for name in features:
         if name in ("wound_shape", "skin_type", "stage"):
             continue
         v = params.get(name)
@@ -96,6 +151,21 @@ def _check_params(
     return values, flagged
 
 
+def angle_weights(meta: dict[str, Any], shape: str, value: float) -> list[tuple[float, float]]:
+    """The trained orientations an answer at ``value`` weighs, with their weights: the value
+    itself (weight 1) on a trained orientation or outside the trained ones (or when the
+    orientations were too many to record), else its two neighbours, linearly in the angle."""
+    grid = meta.get("levels", {}).get(shape, {}).get(ANGLE)
+    if not grid or not grid[0] < value < grid[-1]:
+        return [(float(value), 1.0)]
+    g = np.asarray(grid, dtype=np.float64)
+    if np.min(np.abs(g - value)) <= 1e-9 * max(1.0, float(np.abs(g).max())):
+        return [(float(value), 1.0)]
+    k = int(np.searchsorted(g, value))
+    t = (value - g[k - 1]) / (g[k] - g[k - 1])
+    return [(float(g[k - 1]), float(1.0 - t)), (float(g[k]), float(t))]
+
+
 def interpolation_flags(meta: dict[str, Any], params: Mapping[str, Any]) -> list[str]:
     """The parameters inside the trained range but between the grid's values."""
     levels = meta.get("levels", {}).get(params["wound_shape"], {})
@@ -107,9 +177,11 @@ def interpolation_flags(meta: dict[str, Any], params: Mapping[str, Any]) -> list
         g = np.asarray(grid, dtype=np.float64)
         if np.min(np.abs(g - float(v))) > 1e-9 * max(1.0, float(np.abs(g).max())):
             k = int(np.searchsorted(g, float(v)))
-            out.append(
-                f"{name}={float(v):g} (interpolated between trained values {g[k - 1]:g} and {g[k]:g})"
-            )
+            flag = f"{name}={float(v):g} (interpolated between trained values {g[k - 1]:g} and {g[k]:g})"
+            if name == ANGLE:
+                (_, wa), (_, wb) = angle_weights(meta, params["wound_shape"], float(v))
+                flag += f": their answers weighted {wa:.3g} and {wb:.3g}, linearly in the angle"
+            out.append(flag)
     return out
 
 
@@ -124,6 +196,14 @@ def predict(
     return predict_wound(model, params, stages, allow_extrapolation, level).stages
 
 
+def _rows(values: Mapping[str, float], columns: Sequence[str], stages: Sequence[int]) -> np.ndarray:
+    """One row per stage in the order of a booster's ``columns``."""
+    return np.array(
+        [[values[f] if f != "stage" else float(s) for f in columns] for s in stages],
+        dtype=np.float64,
+    )
+
+
 def predict_wound(
     model: LoadedModel,
     params: Mapping[str, Any],
@@ -134,16 +214,25 @@ def predict_wound(
     """Predict one wound for the given stages (default: all trained).
 
     ``params`` holds the Table 1 parameters by manifest column name (``wound_shape`` and
-    ``skin_type`` as names, the factor that does not apply to the shape as ``None``).
-    Values outside the training data are refused unless ``allow_extrapolation``, and then
-    flagged in each `Prediction`; ``level`` in (0, 1) is the interval's nominal coverage.
+    ``skin_type`` as names, the factors that do not apply to the shape as ``None``;
+    ``mesh_size_factor`` ``None`` for the finest trained). Values outside the training data
+    are refused unless ``allow_extrapolation``, and then flagged in each `Prediction`;
+    ``level`` in (0, 1) is the interval's nominal coverage. An orientation between two
+    trained ones weighs their answers linearly (`angle_weights`).
     """
     if not 0.0 < float(level) < 1.0:
         raise AnalysisError(f"interval level {level}: expected a value between 0 and 1")
     meta = model.meta
+    shape = _check_columns(meta, _check_factors(params))
+    params = dict(params)
+    default_mesh = params.get("mesh_size_factor") is None
+    if default_mesh:
+        params["mesh_size_factor"] = finest_mesh(meta, shape)
     values, flagged = _check_params(meta, params)
     if model.surrogate is not None:  # its training rows may differ (the random split's do)
-        own = _check_params({**meta, "ranges": model.surrogate[1]["ranges"]}, params)[1]
+        sur_meta = {**meta, **{k: model.surrogate[1][k] for k in ("ranges", "features")
+                               if k in model.surrogate[1]}}  # fmt: skip
+        own = _check_params(sur_meta, params)[1]
         flagged += [f"surrogate: {f}" for f in own if f not in flagged]
     stages = list(meta["stages"]) if stages is None else [int(s) for s in stages]
     out_of_range_stages = [s for s in stages if s not in meta["stages"]]
@@ -154,15 +243,25 @@ def predict_wound(
             + "; ".join(flagged + stage_flags)
             + " (use --allow-extrapolation)"
         )
-    X = np.array(
-        [[values[f] if f != "stage" else float(s) for f in FEATURES] for s in stages],
-        dtype=np.float64,
-    )
-    prob = predict_proba(model.booster, X, nthread=1)
-    estimate, bounds = _surrogate(model, X, stages, level)
+    weights = angle_weights(meta, shape, values[ANGLE])
+    prob = np.zeros((len(stages), int(meta["quantiles"])))
+    log_est: np.ndarray | None = None if model.surrogate is None else np.zeros(len(stages))
+    p_fail: float | None = 0.0
+    note = ""
+    for angle, w in weights:
+        at = {**values, ANGLE: angle}
+        prob += w * predict_proba(
+            model.booster, _rows(at, booster_features(model.booster), stages), nthread=1
+        )
+        if log_est is not None:
+            log_est += w * _surrogate_log(model, at, stages)
+        p, note = _failure(model, at)
+        p_fail = None if p is None or p_fail is None else p_fail + w * p
+    estimate, bounds = _surrogate(model, log_est, stages, level)
     edges = meta["quantile_edges_kPa"]
     out = []
     for i, (s, p) in enumerate(zip(stages, prob)):
+        p = p / p.sum()
         k = int(np.argmax(p))
         flags = flagged + [f for f, st in zip(stage_flags, out_of_range_stages) if st == s]
         out.append(
@@ -173,22 +272,32 @@ def predict_wound(
                 None if estimate is None else float(level),
             )
         )  # fmt: skip
-    p_fail, note = _failure(model, X[:1])
-    return WoundPrediction(out, p_fail, note, interpolation_flags(meta, params))
+    return WoundPrediction(
+        out, p_fail, note, interpolation_flags(meta, params),
+        float(params["mesh_size_factor"]), default_mesh, weights,
+    )  # fmt: skip
+
+
+def _surrogate_log(
+    model: LoadedModel, values: Mapping[str, float], stages: Sequence[int]
+) -> np.ndarray:
+    """The surrogate's log p99 (log kPa) per stage."""
+    from .regression import predict_log
+
+    booster = model.surrogate[0]  # type: ignore[index]
+    return predict_log(booster, _rows(values, booster_features(booster), stages), nthread=1)
 
 
 def _surrogate(
-    model: LoadedModel, X: np.ndarray, stages: Sequence[int], level: float
+    model: LoadedModel, log_est: np.ndarray | None, stages: Sequence[int], level: float
 ) -> tuple[list[float] | None, list[tuple[float | None, float | None]] | None]:
-    """The surrogate's estimates (kPa) and interval bounds per stage; ``None`` without one."""
-    if model.surrogate is None:
+    """The surrogate's estimates (kPa) and interval bounds per stage around its log p99
+    ``log_est``; ``None`` without a surrogate."""
+    if model.surrogate is None or log_est is None:
         return None, None
     from .conformal import half_widths
-    from .regression import predict_log
 
-    booster, meta = model.surrogate
-    log_est = predict_log(booster, X, nthread=1)
-    hw = half_widths(meta["calibration_scores_log"], stages, level)
+    hw = half_widths(model.surrogate[1]["calibration_scores_log"], stages, level)
     est = [float(np.exp(v)) for v in log_est]
     bounds = [
         (float(np.exp(v - h)), float(np.exp(v + h))) if np.isfinite(h) else (None, None)
@@ -197,13 +306,15 @@ def _surrogate(
     return est, bounds
 
 
-def _failure(model: LoadedModel, X: np.ndarray) -> tuple[float | None, str]:
+def _failure(model: LoadedModel, values: Mapping[str, float]) -> tuple[float | None, str]:
     """The job's failure probability, or ``None`` and the reason."""
     if model.failure is None:
         return None, "no failure model beside this model (re-run `woundsweep analyze`)"
     booster, meta = model.failure
     if booster is None:
         return None, meta["statement"]
-    from .failure import failure_matrix, predict_failure
+    from .failure import predict_failure
 
-    return float(predict_failure(booster, failure_matrix(X), nthread=1)[0]), meta["statement"]
+    columns = list(booster.feature_names or meta["features"])
+    X = np.array([[values.get(f, np.nan) for f in columns]], dtype=np.float64)
+    return float(predict_failure(booster, X, nthread=1)[0]), meta["statement"]

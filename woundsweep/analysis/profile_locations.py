@@ -17,6 +17,7 @@ import pandas as pd
 
 from ..core.diagnostics import parse_diagnostics
 from ..core.schema import PROFILE_LINES, PROFILE_POINTS
+from .paper import along_half_length
 from .settings import STAGE_GROUPS
 
 __all__ = [
@@ -32,7 +33,8 @@ __all__ = [
 POINTS_PER_BIN = 4
 N_BINS = PROFILE_POINTS // POINTS_PER_BIN
 PROFILE_NORMALISATION = {
-    "along_wound": "(y + L) / 2L, x = 0, z = 0; closure zone ends at 1/3 and 2/3",
+    "along_wound": "(y + L) / 2L (L + l/2 in place of L for the excision), x = 0, z = 0; "
+    "closure zone ends at 1/3 and 2/3",
     "through_thickness": "-z / T, x = 0, y = 0; 0 = skin surface, 1 = bottom face",
     "across_patch": "(x - w/2) / (L + w/2), y = 0, z = 0; 0 = wound mid-plane",
 }
@@ -46,7 +48,8 @@ def _fraction(line: str, at_mm: np.ndarray, rows: pd.DataFrame) -> np.ndarray:
     w = rows["wound_width_mm"].to_numpy(dtype=float)
     T = rows["total_thickness_mm"].to_numpy(dtype=float)
     if line == "along_wound":
-        return (at_mm + L) / (2 * L)
+        Ly = along_half_length(rows)
+        return (at_mm + Ly) / (2 * Ly)
     if line == "through_thickness":
         return (at_mm + T) / T
     return (at_mm + L) / (2 * L + w)

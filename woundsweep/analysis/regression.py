@@ -1,6 +1,6 @@
 """The stress surrogate: XGBoost regression of log p99 (kPa) with conformal intervals.
 
-One booster over the classifier's `FEATURES` (the stage is a feature, so it answers per
+One booster over the classifier's columns (`model_features`; the stage is a feature, so it answers per
 stage). Rows are split by physical geometry, as the classifier's ``geometry`` scheme: its
 training geometries train the booster; its validation geometries are halved at random
 into early-stopping rows and calibration rows (`conformal`); its test geometries are used
@@ -22,9 +22,9 @@ from ..core.errors import AnalysisError
 from ..core.versions import SURROGATE_FORMAT
 from .conformal import calibrate, coverage
 from .evaluation import feature_importance, shap_importance
-from .settings import COVERAGE_LEVELS, FEATURES, STRESS
+from .settings import COVERAGE_LEVELS, STRESS, model_features
 from .splits import geometry_groups, geometry_split
-from .training import dmatrix
+from .training import booster_features, dmatrix
 
 __all__ = ["SurrogateFit", "SurrogateSplit", "fit_surrogate", "predict_log", "surrogate_split"]
 
@@ -64,8 +64,9 @@ def surrogate_split(groups: np.ndarray, settings: ModelSettings) -> SurrogateSpl
 
 
 def predict_log(booster: Any, X: np.ndarray, nthread: int = 2) -> np.ndarray:
-    """The surrogate's log p99 (log kPa) for the rows of ``X``, float64."""
-    return np.asarray(booster.predict(dmatrix(X, nthread=nthread)), dtype=np.float64)
+    """The surrogate's log p99 (log kPa) for the rows of ``X`` (the booster's columns), float64."""
+    d = dmatrix(X, nthread=nthread, features=booster_features(booster))
+    return np.asarray(booster.predict(d), dtype=np.float64)
 
 
 def _params(settings: ModelSettings) -> dict[str, Any]:
@@ -89,8 +90,9 @@ def fit_surrogate(rows: pd.DataFrame, X: np.ndarray, settings: ModelSettings) ->
                 f"stress surrogate: empty {name} set from {len(rows)} rows; too few geometries"
             )
     nt = settings.nthread
-    dtrain = dmatrix(X[split.train], y[split.train], nt)
-    dstop = dmatrix(X[split.stop], y[split.stop], nt)
+    features = model_features(rows["wound_shape"].astype(str))
+    dtrain = dmatrix(X[split.train], y[split.train], nt, features)
+    dstop = dmatrix(X[split.stop], y[split.stop], nt, features)
     log: dict[str, dict[str, list[float]]] = {}
     booster = xgb.train(
         _params(settings), dtrain, num_boost_round=settings.n_estimators,
@@ -124,17 +126,17 @@ def fit_surrogate(rows: pd.DataFrame, X: np.ndarray, settings: ModelSettings) ->
         },
         "importance": {
             **feature_importance(booster),
-            "shap": shap_importance(booster, dmatrix(X, nthread=nt)),
+            "shap": shap_importance(booster, dmatrix(X, nthread=nt, features=features)),
         },
     }
     meta = {
         "format": SURROGATE_FORMAT,
-        "features": list(FEATURES),
+        "features": list(features),
         "target": metrics["target"],
         "stages": sorted(int(s) for s in np.unique(stage[split.train])),
-        "ranges": feature_ranges(X[split.train]),
-        "levels": feature_levels(X[split.train]),
-        "skin_levels_c_kPa": np.unique(X[split.train, FEATURES.index("skin_type")]).tolist(),
+        "ranges": feature_ranges(X[split.train], features),
+        "levels": feature_levels(X[split.train], features),
+        "skin_levels_c_kPa": np.unique(X[split.train, features.index("skin_type")]).tolist(),
         "calibration_scores_log": scores,
         "best_iteration": best,
         "settings": dataclasses.asdict(settings),

@@ -123,6 +123,13 @@ def render_report(metrics: dict[str, Any], figures: Sequence[str]) -> str:
         p = "n/a" if st is None or st["sign_test_p"] is None else f"{st['sign_test_p']:.2g}"
         label = "cylindrical (paper: curved)" if shape == "cylindrical" else shape
         lines.append(f"| {label} | {100 * k / n:.1f}% ({k:,}/{n:,}), p < 0.001 | {ours} | {p} |")
+    for shape in sorted(set(svs) - set(PAPER["stiff_soft"])):  # the excision: not in the paper
+        st = svs[shape]
+        p = "n/a" if st["sign_test_p"] is None else f"{st['sign_test_p']:.2g}"
+        lines.append(
+            f"| {shape} | not in the paper | {100 * st['fraction_stiff_greater']:.1f}% "
+            f"({st['stiff_greater']:,}/{st['pairs']:,}) | {p} |"
+        )
     lines += surrogate_lines(metrics)
     if "max_location_profiles" in metrics:
         lines += profile_report_lines(metrics)
@@ -139,13 +146,14 @@ def render_report(metrics: dict[str, Any], figures: Sequence[str]) -> str:
         "types and orientations of one geometry over all three sets, which flatters the test score.",
         "- Early stopping uses the validation log loss, so validation scores are optimistic; the test "
         "rows are used once, after training.",
-        '- "wound_depth" sums the importances of the wedge depth factor and the cylinder aspect '
-        "(offset) factor columns, mirroring the paper's combined column. Importance counts splits "
-        "over all trees of all classes.",
+        '- "wound_depth" sums the importances of the wedge depth factor (the excision\'s too) and '
+        "the cylinder aspect (offset) factor columns, mirroring the paper's combined column. "
+        "Importance counts splits over all trees of all classes.",
         "- Maximal stress is the volume-weighted 99th percentile of von Mises (the published code "
         "took the percentile over nodal values).",
         "- Stiff > soft: ties count as not greater and are dropped from the two-sided sign test.",
-        "- Figure 2 positions: y as (y + L)/2L (closure zone ends at 1/3 and 2/3), x as "
+        "- Figure 2 positions: y as (y + L)/2L (closure zone ends at 1/3 and 2/3; L + l/2 in place "
+        "of L for the excision), x as "
         "(x - w/2)/(L + w/2) (0 = wound mid-plane), z as depth -z/T (0 = surface); values outside "
         "the range are clipped into the end bins (counts in metrics.json).",
         "",

@@ -5,9 +5,9 @@ sampling on a scrambled Sobol sequence, Jansen / Saltelli 2010 estimators, SALib
 ``sobol``). `surrogate_sobol` applies it to the surrogate's log p99 over the training
 ranges, one input per `IMPORTANCE_GROUPS` entry: numeric parameters uniform over
 [min, max] of the training rows, the wound shape, skin type and stage uniform over their
-trained levels, and ``wound_depth`` uniform over the wedge depth factor or the cylinder
-aspect factor range, whichever applies to the sampled shape (oriented so that a larger value
-is a deeper wound for both). Inputs with a single trained
+trained levels, and ``wound_depth`` uniform over the wedge's or excision's depth factor or the
+cylinder aspect factor range, whichever applies to the sampled shape (oriented so that a larger
+value is a deeper wound for all), the excision's length factor on excisions only. Inputs with a single trained
 value are fixed. The grid's exclusions are not applied: the surrogate is evaluated on the
 whole box.
 """
@@ -19,7 +19,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from .settings import FEATURES, IMPORTANCE_GROUPS, SHAPE_CODES
+from .settings import FEATURES, IMPORTANCE_GROUPS, SHAPE_CODES, SHAPE_FACTORS
 
 __all__ = ["SobolInput", "sobol_indices", "surrogate_inputs", "surrogate_sobol"]
 
@@ -101,10 +101,17 @@ def _numeric(
 
 
 def surrogate_inputs(meta: dict[str, Any]) -> tuple[list[SobolInput], dict[str, float]]:
-    """The varied inputs and the fixed ones (a single trained value), from `fit_surrogate` meta."""
+    """The varied inputs and the fixed ones (a single trained value), from `fit_surrogate` meta.
+
+    A group none of whose members is a column of the surrogate, or was trained on (the
+    excision's length factor in a store of trenches), is no input."""
     ranges = meta["ranges"]
+    columns = set(meta.get("features", FEATURES))
+    trained = {m for r in ranges.values() for m in r}
     cand: list[SobolInput] = []
     for group, members in IMPORTANCE_GROUPS.items():
+        if not set(members) & columns:
+            continue
         if group == "wound_shape":
             levels = tuple(SHAPE_CODES[s] for s in sorted(ranges, key=SHAPE_CODES.get))
         elif group == "skin_type":
@@ -117,7 +124,8 @@ def surrogate_inputs(meta: dict[str, Any]) -> tuple[list[SobolInput], dict[str, 
             cand.append(SobolInput(group, 0.0, 1.0 if wide else 0.0))
             continue
         else:
-            cand.append(_numeric(group, members, meta, None))
+            if set(members) & trained:
+                cand.append(_numeric(group, members, meta, None))
             continue
         cand.append(SobolInput(group, 0.0, 1.0, levels))
     varied = [c for c in cand if (len(c.levels) > 1 if c.levels else c.high > c.low)]
@@ -125,15 +133,22 @@ def surrogate_inputs(meta: dict[str, Any]) -> tuple[list[SobolInput], dict[str, 
     return varied, fixed
 
 
+# Each shape's own depth column (a larger value is a deeper wound, except the cylinder's).
+_DEPTH = {
+    "wedge": "wound_depth_factor",
+    "fusiform": "wound_depth_factor",
+    "cylindrical": "wound_aspect_factor",
+}
+
+
 def _depth_inputs(meta: dict[str, Any]) -> dict[float, SobolInput]:
     """Shape code -> the input of its own depth column; a larger value is a deeper wound for
-    both shapes (the largest wedge depth factor, the smallest cylinder offset: the axis sits
-    at z = a w, so a larger a is shallower)."""
-    own = {"wedge": "wound_depth_factor", "cylindrical": "wound_aspect_factor"}
+    every shape (the largest wedge or excision depth factor, the smallest cylinder offset:
+    the axis sits at z = a w, so a larger a is shallower)."""
     return {
-        SHAPE_CODES[s]: _numeric(own[s], (own[s],), meta, s)
+        SHAPE_CODES[s]: _numeric(_DEPTH[s], (_DEPTH[s],), meta, s)
         for s, r in meta["ranges"].items()
-        if own[s] in r
+        if _DEPTH[s] in r
     }
 
 
@@ -143,22 +158,29 @@ def surrogate_function(
     fixed: dict[str, float],
     meta: dict[str, Any],
 ) -> Callable[[np.ndarray], np.ndarray]:
-    """Unit-cube points -> `FEATURES` rows -> ``predict`` (the surrogate's log p99)."""
+    """Unit-cube points -> rows of the surrogate's columns -> ``predict`` (its log p99).
+
+    A shape's own factors are set on the rows of that shape only (NaN on the others, as in
+    training): the depth input per shape (`_depth_inputs`), the length factor on excisions."""
     depth = _depth_inputs(meta)
+    features = list(meta.get("features", FEATURES))
+    own = {f: s for s, fs in SHAPE_FACTORS.items() for f in fs if f not in _DEPTH.values()}
 
     def func(U: np.ndarray) -> np.ndarray:
         val = {c.name: c.scale(U[:, i]) for i, c in enumerate(inputs)}
         val.update({k: np.full(len(U), v) for k, v in fixed.items()})
-        X = np.full((len(U), len(FEATURES)), np.nan)
-        for j, f in enumerate(FEATURES):
+        X = np.full((len(U), len(features)), np.nan)
+        for j, f in enumerate(features):
             if f in val:
                 X[:, j] = val[f]
+                if f in own:
+                    X[val["wound_shape"] != SHAPE_CODES[own[f]], j] = np.nan
         for code, c in depth.items():
             sel = val["wound_shape"] == code
             u = val["wound_depth"][sel]
             if not c.levels:  # a range: the cylinder's runs from its largest offset down
                 u = u if c.name == "wound_depth_factor" else 1.0 - u
-            X[sel, FEATURES.index(c.name)] = c.scale(u)
+            X[sel, features.index(c.name)] = c.scale(u)
         return predict(X)
 
     return func

@@ -11,7 +11,7 @@ from ..config.analysis import ModelSettings
 from .settings import FEATURES
 from .splits import Split
 
-__all__ = ["Trained", "dmatrix", "predict_proba", "train_model"]
+__all__ = ["Trained", "booster_features", "dmatrix", "predict_proba", "train_model"]
 
 
 class Trained(NamedTuple):
@@ -35,12 +35,18 @@ def dmatrix(
     return xgb.DMatrix(X, label=y, feature_names=list(features), missing=np.nan, nthread=nthread)
 
 
-def train_model(X: np.ndarray, y: np.ndarray, split: Split, settings: ModelSettings) -> Trained:
-    """Boost on the training rows, stop early on the validation log loss."""
+def train_model(
+    X: np.ndarray,
+    y: np.ndarray,
+    split: Split,
+    settings: ModelSettings,
+    features: Sequence[str] = FEATURES,
+) -> Trained:
+    """Boost on the training rows (columns ``features``), stop early on the validation log loss."""
     import xgboost as xgb
 
-    dtrain = dmatrix(X[split.train], y[split.train], settings.nthread)
-    dval = dmatrix(X[split.validation], y[split.validation], settings.nthread)
+    dtrain = dmatrix(X[split.train], y[split.train], settings.nthread, features)
+    dval = dmatrix(X[split.validation], y[split.validation], settings.nthread, features)
     log: dict[str, dict[str, list[float]]] = {}
     booster = xgb.train(
         settings.xgb_params(),
@@ -57,7 +63,14 @@ def train_model(X: np.ndarray, y: np.ndarray, split: Split, settings: ModelSetti
     return Trained(booster[: best + 1], best, rounds, log)
 
 
+def booster_features(booster: Any) -> list[str]:
+    """The columns a booster was trained on (`FEATURES` for one saved without names)."""
+    return list(booster.feature_names or FEATURES)
+
+
 def predict_proba(booster: Any, X: np.ndarray, nthread: int = 2) -> np.ndarray:
-    """Class probabilities (rows x q), renormalised in float64 (XGBoost sums in float32)."""
-    prob = np.asarray(booster.predict(dmatrix(X, nthread=nthread)), dtype=np.float64)
+    """Class probabilities (rows x q), renormalised in float64 (XGBoost sums in float32);
+    ``X`` has the booster's columns."""
+    d = dmatrix(X, nthread=nthread, features=booster_features(booster))
+    prob = np.asarray(booster.predict(d), dtype=np.float64)
     return prob / prob.sum(axis=1, keepdims=True)

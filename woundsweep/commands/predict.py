@@ -1,5 +1,9 @@
 """``woundsweep predict MODEL_OR_RUN_DIR --shape ... (all parameters)``: one wound's stress
-estimate with its interval, the paper's stress quantile and the failure probability."""
+estimate with its interval, the paper's stress quantile and the failure probability.
+
+The orientation is given either as ``--orientation`` (the stiff axis' angle to x, the sweep's
+``orientation_deg``) or as ``--angle-to-langer`` (the wound's long axis against the Langer
+line, the stiff axis: ``orientation_deg = 90 - angle``)."""
 
 from __future__ import annotations
 
@@ -22,20 +26,36 @@ _NUMERIC_PARAMS = (
     ("--subcutis-thickness-factor", "subcutis_thickness_factor", True, "Subcutis thickness / t_d."),
     ("--patch-size-factor", "patch_size_factor", True, "Patch half-length / total thickness."),
     ("--wound-width-factor", "wound_width_factor", True, "Wound width / patch half-length."),
-    ("--wound-depth-factor", "wound_depth_factor", False, "Wedge only: depth / total thickness."),
+    (
+        "--wound-depth-factor",
+        "wound_depth_factor",
+        False,
+        "Wedge and fusiform: depth / total thickness.",
+    ),
     (
         "--wound-aspect-factor",
         "wound_aspect_factor",
         False,
         "Cylindrical only: axis offset / width.",
     ),
-    ("--mesh-size-factor", "mesh_size_factor", True, "Mesh size factor (larger = finer)."),
+    ("--wound-length-factor", "wound_length_factor", False, "Fusiform only: length / width."),
+    (
+        "--mesh-size-factor",
+        "mesh_size_factor",
+        False,
+        "Mesh size factor (larger = finer) [the finest trained for the shape].",
+    ),
     (
         "--orientation",
         "orientation_deg",
-        True,
-        "Stiff axis angle to x, 0 = across the wound (deg).",
+        False,
+        "Stiff axis angle to x, 0 = across the wound (deg); or --angle-to-langer.",
     ),
+)
+# The wound's long axis against the Langer line (the stiff axis), 0 = along it.
+_ANGLE_HELP = (
+    "Angle of the wound's long axis to the Langer line, 0-90 deg (0 = along it): "
+    "--orientation 90 - DEG."
 )
 
 
@@ -47,13 +67,26 @@ def _numeric_params(f: Callable[..., None]) -> Callable[..., None]:
     return f
 
 
-def parse_params(shape: str, skin_type: str, numeric: dict[str, float | None]) -> dict[str, Any]:
-    """The wound's parameters by manifest column name, from the command's options."""
-    return {
+def parse_params(
+    shape: str,
+    skin_type: str,
+    numeric: dict[str, float | None],
+    angle_to_langer: float | None = None,
+) -> dict[str, Any]:
+    """The wound's parameters by manifest column name, from the command's options: exactly
+    one of ``--orientation`` and ``--angle-to-langer`` (converted to 90 - angle)."""
+    params = {
         "wound_shape": shape,
         **{column: numeric[column] for _, column, _, _ in _NUMERIC_PARAMS},
         "skin_type": skin_type,
     }
+    if (params["orientation_deg"] is None) == (angle_to_langer is None):
+        raise click.UsageError(
+            "give the orientation as exactly one of --orientation and --angle-to-langer"
+        )
+    if angle_to_langer is not None:
+        params["orientation_deg"] = 90.0 - angle_to_langer
+    return params
 
 
 def _warn_if_stale(loaded: Any) -> None:
@@ -71,9 +104,13 @@ def _warn_if_stale(loaded: Any) -> None:
 @click.command("predict")
 @click.argument("model", type=click.Path(path_type=Path))
 @click.option(
-    "--shape", required=True, type=click.Choice(["cylindrical", "wedge"]), help="Wound shape."
+    "--shape",
+    required=True,
+    type=click.Choice(["cylindrical", "wedge", "fusiform"]),
+    help="Wound shape.",
 )
 @_numeric_params
+@click.option("--angle-to-langer", type=FiniteFloat(0, 90), default=None, help=_ANGLE_HELP)
 @click.option("--skin-type", required=True, help="Skin type name, e.g. soft, normal, stiff.")
 @click.option(
     "--stage", "stages", type=click.IntRange(1, 6), multiple=True, help="Stage(s) [all trained]."
@@ -97,6 +134,7 @@ def cmd(
     level: float,
     allow_extrapolation: bool,
     as_json: bool,
+    angle_to_langer: float | None,
     **numeric: float | None,
 ) -> None:
     """Predict one wound's maximal stress with the models from `woundsweep analyze`.
@@ -105,20 +143,26 @@ def cmd(
     surrogate's estimate (p99 von Mises, kPa) with its conformal interval at --level, the
     paper's quantile class (1 = lowest stresses), its class probabilities and stress range in
     kPa (the end classes are bounded by the smallest / largest training stress); then the
-    probability that the job fails to converge. Values between the trained grid values are
-    answered and flagged as interpolated; values outside the trained ranges are refused
-    unless --allow-extrapolation.
+    probability that the job fails to converge.
+
+    The orientation is --orientation (the stiff axis' angle to x) or --angle-to-langer DEG
+    (the wound's long axis against the Langer line; orientation = 90 - DEG). Between two
+    trained orientations the models are evaluated at both and their answers weighted
+    linearly in the angle. Other values between the trained grid values are answered by the
+    trees as they are and flagged as interpolated; values outside the trained ranges are
+    refused unless --allow-extrapolation. Without --mesh-size-factor the answer is for the
+    finest mesh trained on for the shape (stated).
     """
     from ..analysis import load_model, predict_wound
     from ..core.errors import AnalysisError
 
+    params = parse_params(shape, skin_type, numeric, angle_to_langer)
     try:
         loaded = load_model(model, scheme)
         q, scheme_name = int(loaded.meta["quantiles"]), str(loaded.meta["scheme"])
     except (AttributeError, TypeError, KeyError, ValueError) as err:  # e.g. metadata `null`
         raise AnalysisError(f"{model}: malformed model metadata ({type(err).__name__})") from None
     _warn_if_stale(loaded)
-    params = parse_params(shape, skin_type, numeric)
     answer = predict_wound(loaded, params, list(stages) or None, allow_extrapolation, level)
     preds = answer.stages
     if as_json:
@@ -131,10 +175,21 @@ def cmd(
             "failure_probability": answer.failure_probability,
             "failure_note": answer.failure_note,
             "interpolated": answer.interpolated,
+            "orientation_deg": params["orientation_deg"],
+            "angle_to_langer_deg": 90.0 - params["orientation_deg"],
+            "orientation_weights": [list(p) for p in answer.orientation_weights],
+            "mesh_size_factor": answer.mesh_size_factor,
+            "mesh_size_factor_default": answer.mesh_size_default,
         }
         click.echo(json.dumps(out, indent=1))
         return
     click.echo(f"model: {loaded.path} ({scheme_name} split, {q} quantiles)")
+    angle = params["orientation_deg"]
+    how = "the finest trained, none given" if answer.mesh_size_default else "given"
+    click.echo(
+        f"orientation_deg {angle:g} (angle to the Langer line {90 - angle:g} deg); "
+        f"mesh_size_factor {answer.mesh_size_factor:g} ({how})"
+    )
     for p in preds:
         stress = ""
         if p.stress_kPa is not None:

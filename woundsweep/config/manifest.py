@@ -13,7 +13,7 @@ import itertools
 import json
 import math
 import re
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any, NamedTuple, TypedDict
 
@@ -206,8 +206,12 @@ class Run(NamedTuple):
 _LATER_COLUMNS = ("wound_length_factor", "wound_length_mm")
 
 
-def load_run(run_dir: str | Path) -> Run:
-    """Open a run directory: its sweep copy and its manifest."""
+def load_run(run_dir: str | Path, job: int | None = None) -> Run:
+    """Open a run directory: its sweep copy and its manifest.
+
+    With ``job`` only that job's row has its ids recomputed from its parameters (a job's
+    process: its runner checked every row; hashing all 11,664 rows of the paper grid costs a
+    short job a tenth of its CPU time); every other check covers the whole manifest."""
     rd = Path(run_dir)
     manifest_path, sweep_path = rd / "manifest.parquet", rd / "sweep.yaml"
     if not manifest_path.is_file() or not sweep_path.is_file():
@@ -225,7 +229,7 @@ def load_run(run_dir: str | Path) -> Run:
     if missing:
         raise StoreError(f"{manifest_path}: missing columns {missing}")
     sweep = load_sweep(sweep_path)
-    problem = manifest_problem(manifest, sweep)
+    problem = manifest_problem(manifest, sweep, None if job is None else (int(job),))
     if problem:
         raise StoreError(
             f"{manifest_path}: damaged manifest: {problem} (rewrite it with `woundsweep "
@@ -238,11 +242,14 @@ def _ids_ok(values: pd.Series) -> bool:
     return bool(values.map(lambda v: isinstance(v, str) and ID_RE.fullmatch(v) is not None).all())
 
 
-def manifest_problem(manifest: pd.DataFrame, sweep: Sweep) -> str:
+def manifest_problem(
+    manifest: pd.DataFrame, sweep: Sweep, hashed: Sequence[int] | None = None
+) -> str:
     """What makes ``manifest`` not a manifest `expand` could have written ("" if nothing):
     indices not 0..N-1, duplicate jobs, ids that are not 16 hex digits or not the hash of the
-    row's parameters (ids name files), derived lengths that differ from the parameters'
-    (they size the mesh), a shape or skin type the sweep does not know."""
+    row's parameters (ids name files; only the rows ``hashed``, default all), derived lengths
+    that differ from the parameters' (they size the mesh), a shape or skin type the sweep does
+    not know."""
     n = len(manifest)
     if n == 0:
         return "no jobs"
@@ -272,10 +279,11 @@ def manifest_problem(manifest: pd.DataFrame, sweep: Sweep) -> str:
         bad = ~np.isclose(a, b, rtol=1e-12, atol=0.0, equal_nan=True)
         if bad.any():
             return f"job {int(idx[bad].iloc[0])}: {col} is not derived from its parameters"
-    records = params.to_dict("records")
+    rows = list(range(n)) if hashed is None else [i for i in hashed if 0 <= i < n]
+    records = params.iloc[rows].to_dict("records")
     job_ids, geometry_ids = manifest["job_id"].tolist(), manifest["geometry_id"].tolist()
     geometries: dict[str, str] = {}  # geometry_id -> its hash, computed once per geometry
-    for i, rec in enumerate(records):
+    for i, rec in zip(rows, records):
         if canonical_hash(rec) != job_ids[i]:
             return f"job {i}: job_id is not the hash of its parameters"
         gid = geometry_ids[i]

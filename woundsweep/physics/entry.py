@@ -74,7 +74,7 @@ def solve(
             check_output_file(out)
         except ValueError as err:
             raise SolverError(f"--out {err}") from None
-    run = load_run(run_dir)  # a bad run directory fails here, before DOLFINx is imported
+    run = load_run(run_dir, job_index)  # a bad run directory fails here, before DOLFINx loads
     if fingerprint:
         from ..store.identity import result_fingerprint
 

@@ -20,7 +20,7 @@ from petsc4py import PETSc
 from ..core.schema import DERMIS, SUBCUTIS
 from . import compat
 from .domain import LATERAL_DERMIS, LATERAL_SUBCUTIS, WoundDomain
-from .materials import Fung, JobMaterials, Material, MooneyRivlin, von_mises
+from .materials import Fung, JobMaterials, Material, MooneyRivlin, first_piola, von_mises
 
 __all__ = ["STRESS_RULE_DEGREE", "StressSamples", "WoundForms"]
 
@@ -80,7 +80,7 @@ class WoundForms:
         u = self.u
         v, du = ufl.TestFunction(V), ufl.TrialFunction(V)
         d = len(u)
-        F = ufl.variable(ufl.Identity(d) + ufl.grad(u))
+        F = ufl.Identity(d) + ufl.grad(u)
         dermis_sym, self._dermis_c = _symbolic(mesh, Fung.normal())
         sub_sym, self._sub_c = _symbolic(mesh, MooneyRivlin.subcutis())
         self.T_dermis = _constant(mesh, np.zeros((3, 3)))
@@ -90,8 +90,7 @@ class WoundForms:
         ds = ufl.Measure("ds", domain=mesh, subdomain_data=domain.solver_facet_mt, metadata=md)
         N = ufl.FacetNormal(mesh)
         psi_d, psi_s = dermis_sym.strain_energy(F), sub_sym.strain_energy(F)
-        P_d = ufl.diff(psi_d, F)
-        P_s = ufl.diff(psi_s, F)
+        P_d, P_s = first_piola(dermis_sym, F), first_piola(sub_sym, F)
         R = (
             ufl.inner(P_d, ufl.grad(v)) * dx(DERMIS)
             + ufl.inner(P_s, ufl.grad(v)) * dx(SUBCUTIS)

@@ -40,7 +40,14 @@ from .view import job_body
 __all__ = ["LOG_BYTES", "AtlasSummary", "build_atlas", "log_html", "parse_views"]
 
 LOG_BYTES = 64 * 1024
-_INDEX_PARAMS = (*GEOMETRY_KEYS, "orientation_deg", "skin_type", "wound_width_mm", "wound_depth_mm")
+_INDEX_PARAMS = (
+    *GEOMETRY_KEYS,
+    "orientation_deg",
+    "skin_type",
+    "wound_width_mm",
+    "wound_depth_mm",
+    "wound_length_mm",
+)
 _ASSETS = ("viewer.js", "index.js", "style.css")
 
 

@@ -596,4 +596,50 @@ def _predict_extrapolated(opt: str, value: str) -> Callable[[Path], list[str]]:
     return setup
 
 
-CASES = sweep_cases() + file_cases() + run_dir_cases() + predict_cases()
+# `case`: every flag's bad values (each refused before anything is meshed or solved).
+_CASE_BAD = {
+    "--length-mm": ("nan", "inf", "-1", "0", "x", "1e999"),
+    "--width-mm": ("nan", "-inf", "0", "20", "25", "x"),  # the length is 20
+    "--angle-deg": ("nan", "-1", "90.5", "x"),
+    "--site": ("moon",),
+    "--dermis-mm": ("nan", "0", "-2", "x"),
+    "--subcutis-mm": ("inf", "0", "x"),
+    "--depth-mm": ("nan", "1", "7.5", "x"),  # within the dermis; through the 7.5 mm patch
+    "--skin": ("leather",),
+    "--sutures": ("0", "-3", "1.5", "x"),
+    "--spacing-mm": ("nan", "0", "-3", "30", "x"),
+    "--bite-width-mm": ("nan", "0", "-1", "x"),
+    "--bite-depth-mm": ("nan", "0", "3.5", "x"),  # 3.5 mm reaches below the walls
+    "--itch-strain": ("nan", "-0.1", "0.6", "x"),
+    "--itch-angle-deg": ("nan", "181", "x"),
+    "--itch-kind": ("twist",),
+    "--element": ("3", "0", "x"),
+    "--mesh-factor": ("nan", "0", "2.5", "x"),
+}
+
+
+def _case(opt: str, value: str) -> Callable[[Path], list[str]]:
+    def setup(ws: Path) -> list[str]:
+        return ["case", "--out", "case-report", opt, value]
+
+    return setup
+
+
+def case_cases() -> list[Case]:
+    cases = [
+        Case(f"case{opt}-{v}", _case(opt, v)) for opt, values in _CASE_BAD.items() for v in values
+    ]
+
+    def both(ws: Path) -> list[str]:
+        return ["case", "--out", "o", "--sutures", "3", "--spacing-mm", "4"]
+
+    def out_file(ws: Path) -> list[str]:
+        (ws / "f").write_text("")
+        return ["case", "--out", "f"]
+
+    cases.append(Case("case-count-and-spacing", both, contains="spacing"))
+    cases.append(Case("case-out-is-a-file", out_file, contains="--out"))
+    return cases
+
+
+CASES = sweep_cases() + file_cases() + run_dir_cases() + predict_cases() + case_cases()

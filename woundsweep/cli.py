@@ -71,6 +71,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "woundsweep.commands.atlas",
         "Static site of a run: index of every job, job pages with 3D views, analysis.",
     ),
+    "case": (
+        "woundsweep.commands.case",
+        "One clinical case: an elliptical excision closed by sutures; report with forces.",
+    ),
 }
 
 

@@ -59,6 +59,8 @@ class WoundModel:
 
     The forms compile on construction (JIT cache hits after the first time on a machine);
     ``jit_time_s`` records how long that took. Materials can be reassigned between jobs.
+    ``tie_zone`` False leaves the closure zone untied in the contact stages (its nodes are
+    contact points): the sutured closure (`woundsweep.physics.sutures`) holds it instead.
     """
 
     def __init__(
@@ -68,6 +70,7 @@ class WoundModel:
         stages: StageSettings | None = None,
         *,
         jit: dict[str, Any] | None = None,
+        tie_zone: bool = True,
     ) -> None:
         solver = solver or SolverSettings()
         # Without stage settings the closure zone is the one the mesh was built with.
@@ -83,9 +86,13 @@ class WoundModel:
         if d.has_wound:
             flanks = split_wound_flanks(d.X, d.cell_vertices, d.wound_facets(), d.x_c)
             left, right = (d.element.sub_triangles(f) for f in flanks)
-            self.tie = ZoneTie(d.X, d.zone_left_nodes, d.zone_right_nodes, left, d.x_c)
-            self.contact = FlankContact(d.X, left, right, tied=self.tie.pairs.ravel())
-            self.closure_line = ClosureLine(d.X, self.tie.pairs, np.unique(left), d.z_top)
+            pairs = ZoneTie(d.X, d.zone_left_nodes, d.zone_right_nodes, left, d.x_c)
+            # Without the tie (sutures hold the wound instead, `physics.sutures`) every flank
+            # node is a contact point; the mirror pairs still measure the closure.
+            self.tie = pairs if tie_zone else None
+            tied = pairs.pairs.ravel() if tie_zone else None
+            self.contact = FlankContact(d.X, left, right, tied=tied)
+            self.closure_line = ClosureLine(d.X, pairs.pairs, np.unique(left), d.z_top)
         self.forms = WoundForms(d, solver.form_quadrature_degree, jit)
         self.problem = WoundProblem(d, self.forms, self.contact, self.tie)
         self.newton = NewtonSolver(self.problem, self.problem.A, solver.newton)

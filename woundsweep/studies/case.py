@@ -1,0 +1,213 @@
+"""One clinical case solved (`woundsweep case`): the sutured closure at the case's angle, the
+load after closure, a placement that evens the suture forces (found by re-solving) and the
+same wound along the Langer line (docs/model.md, "Sutures"; docs/design.md, "case").
+
+Evening the forces: a suture's force is about the closing load of the stretch of wound it
+holds, the part of the wound nearer to it than to its neighbours. From a solve, the load per
+length of each suture's stretch is its force over the stretch's length; the sutures are moved
+to the quantiles (i + 1/2) / n of that piecewise-constant load along the wound, and the
+wound is solved again, `EVEN_ROUNDS` times; the placement with the smallest ratio of the
+largest to the smallest force is kept.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from typing import NamedTuple
+
+import numpy as np
+
+from ..config.case import ClinicalCase
+from ..config.geometry import FINEST_FACTOR
+from ..config.solver import SolverSettings
+from ..core.errors import SolverError
+from ..core.schema import ExitCode, StageStatus
+from ..physics.materials import JobMaterials
+from ..physics.suture_measures import SurfacePatch, SutureState
+from ..physics.sutures import SolveStep, SuturedClosure
+
+__all__ = [
+    "CONVERGE_RATIO",
+    "EVEN_ROUNDS",
+    "ITCH_STEPS",
+    "CaseResult",
+    "MeshLevel",
+    "even_positions",
+    "run_case",
+]
+
+EVEN_ROUNDS = 2
+ITCH_STEPS = 4
+# `--converge`: two more meshes, each this much finer (mesh size factor) than the last.
+CONVERGE_RATIO = 1.5
+
+
+class MeshLevel(NamedTuple):
+    """The sutured closure on one mesh of a convergence check."""
+
+    mesh_size_factor: float
+    dofs: int
+    suture_force_mN: np.ndarray
+    dog_ear_height_mm: float
+
+
+class CaseNotSolved(SolverError):
+    """A solve of the case did not converge (exit 3)."""
+
+    exit_code = ExitCode.NOT_CONVERGED
+
+
+class CaseResult(NamedTuple):
+    case: ClinicalCase
+    dofs: int
+    closing_force_mN: float  # the stage-2 Dirichlet closure's pull on the left flank
+    closed: SutureState  # stage 2
+    sutured: SutureState
+    itch: list[SolveStep]
+    evened: list[SutureState]  # each re-solved placement
+    along: SutureState | None  # the same wound along the Langer line (None at angle 0)
+    along_closing_force_mN: float | None
+    time_s: float
+    levels: list[MeshLevel]  # the mesh convergence check (empty without it)
+    surface: SurfacePatch  # the sutured skin surface around the wound
+
+
+def even_positions(
+    ys: np.ndarray, forces: np.ndarray, half_length: float, end_margin: float
+) -> np.ndarray:
+    """Positions (module docstring) of len(ys) sutures carrying equal shares of the load
+    per length that ``forces`` at ``ys`` imply, within ``half_length - end_margin`` of the
+    centre."""
+    ys = np.asarray(ys, dtype=float)
+    n = len(ys)
+    edges = np.concatenate([[-half_length], 0.5 * (ys[1:] + ys[:-1]), [half_length]])
+    load = np.maximum(np.asarray(forces, dtype=float), 1e-9)
+    cum = np.concatenate([[0.0], np.cumsum(load)])
+    targets = (np.arange(n) + 0.5) / n * cum[-1]
+    new = np.interp(targets, cum, edges)
+    lim = half_length - end_margin
+    return np.clip(new, -lim, lim)
+
+
+def _spread(f: np.ndarray) -> float:
+    return float(f.max() / max(f.min(), 1e-9))
+
+
+def run_case(
+    case: ClinicalCase,
+    echo: Callable[[str], None] = print,
+    compare: bool = True,
+    even: bool = True,
+    converge: bool = False,
+) -> CaseResult:
+    """Solve ``case`` (module docstring); with ``converge`` also the sutured closure on two
+    finer meshes (`CONVERGE_RATIO`); CaseNotSolved if a solve does not converge."""
+    from ..mesh.build import build_mesh
+
+    t0 = time.perf_counter()
+    spec = case.geometry()
+    echo(f"mesh: {spec.describe()}")
+    mesh = build_mesh(spec)
+    solver = SolverSettings(element_degree=case.element_degree)
+    sc = SuturedClosure(mesh, spec.lens(), case.zone_depth_fraction, solver)
+    echo(f"model: {sc.domain.n_dofs} dofs, P{case.element_degree}")
+
+    def close(angle: float) -> tuple[SutureState, float]:
+        orientation = 90.0 - angle
+        steps = sc.close(JobMaterials.table2(case.skin_type, orientation), orientation)
+        for k, st in enumerate(steps, 1):
+            echo(
+                f"  stage {k}: {st.status} ({st.newton_iterations} Newton steps, {st.time_s:.1f} s)"
+            )
+        if steps[-1].status != StageStatus.CONVERGED or len(steps) < 2:
+            raise CaseNotSolved(f"stage {len(steps)} {steps[-1].status} at {angle:g} degrees")
+        assert steps[-1].state is not None
+        force = float(sc.model.results[2].diagnostics["closure_force_left_mN"])
+        return steps[-1].state, force
+
+    def suture(ys: np.ndarray | None, what: str) -> SutureState:
+        try:
+            st = sc.suture(case.sutures, None if ys is None else tuple(ys))
+        except ValueError as err:
+            raise CaseNotSolved(f"{what}: {err}") from None
+        echo(f"  {what}: {st.status} ({st.newton_iterations} Newton steps, {st.time_s:.1f} s)")
+        if st.state is None:
+            raise CaseNotSolved(f"{what}: {st.status}")
+        return st.state
+
+    echo(f"closure at {case.angle_deg:g} degrees to the Langer line")
+    closed, closing = close(case.angle_deg)
+    sutured = suture(None, "sutures")
+    surface = sc.surface(case.sutures.bite_width_mm)
+    echo(
+        f"load after closure: {case.itch.kind} {case.itch.strain:g} at {case.itch.angle_to_langer_deg:g} degrees"
+    )
+    itch = sc.itch(case.itch, ITCH_STEPS)
+    for j, st in enumerate(itch, 1):
+        echo(
+            f"  {j}/{ITCH_STEPS}: {st.status} ({st.newton_iterations} Newton steps, {st.time_s:.1f} s)"
+        )
+    evened: list[SutureState] = []
+    if even and len(sutured.suture_y_mm) > 1:
+        state = sutured
+        for r in range(EVEN_ROUNDS):
+            ys = even_positions(
+                state.suture_y_mm, state.suture_force_mN, case.length_mm / 2,
+                0.5 * case.sutures.bite_width_mm,
+            )  # fmt: skip
+            try:
+                state = suture(ys, f"evened placement {r + 1}")
+            except CaseNotSolved as err:
+                echo(f"  evened placement {r + 1} stopped: {err}")
+                break
+            evened.append(state)
+    along = along_force = None
+    if compare and case.angle_deg != 0:
+        echo("the same wound along the Langer line")
+        _, along_force = close(0.0)
+        along = suture(None, "sutures")
+    levels = [
+        MeshLevel(case.mesh_size_factor, sc.domain.n_dofs, sutured.suture_force_mN,
+                  sutured.dog_ear_height_mm)
+    ] if converge else []  # fmt: skip
+    for k in (1, 2) if converge else ():
+        m = case.mesh_size_factor * CONVERGE_RATIO**k
+        if m > FINEST_FACTOR:
+            break
+        levels.append(_level(case, m, echo))
+    return CaseResult(
+        case, sc.domain.n_dofs, closing, closed, sutured, itch, evened, along, along_force,
+        time.perf_counter() - t0, levels, surface,
+    )  # fmt: skip
+
+
+def _level(case: ClinicalCase, m: float, echo: Callable[[str], None]) -> MeshLevel:
+    """The sutured closure of ``case`` on the mesh of factor ``m``."""
+    from ..mesh.build import build_mesh
+
+    spec = case.geometry(m)
+    sc = SuturedClosure(
+        build_mesh(spec), spec.lens(), case.zone_depth_fraction,
+        SolverSettings(element_degree=case.element_degree),
+    )  # fmt: skip
+    echo(f"mesh convergence: m = {m:.4g}, {sc.domain.n_dofs} dofs")
+    steps = sc.close(
+        JobMaterials.table2(case.skin_type, case.orientation_deg), case.orientation_deg
+    )
+    if steps[-1].status != StageStatus.CONVERGED or len(steps) < 2:
+        raise CaseNotSolved(f"m = {m:.4g}: stage {len(steps)} {steps[-1].status}")
+    st = sc.suture(case.sutures)
+    echo(f"  sutures: {st.status} ({st.newton_iterations} Newton steps, {st.time_s:.1f} s)")
+    if st.state is None:
+        raise CaseNotSolved(f"m = {m:.4g}: sutures {st.status}")
+    return MeshLevel(m, sc.domain.n_dofs, st.state.suture_force_mN, st.state.dog_ear_height_mm)
+
+
+def best_evened(result: CaseResult) -> SutureState | None:
+    """The evened placement with the smallest max/min force ratio, if it beats the plan's."""
+    best = None
+    for st in result.evened:
+        if _spread(st.suture_force_mN) < _spread((best or result.sutured).suture_force_mN):
+            best = st
+    return best

@@ -47,15 +47,6 @@ def test_positions_outside_the_wound_are_refused() -> None:
         SuturePlan(spacing_mm=30.0).positions(20.0)
 
 
-def test_thread_stiffness_is_EA_over_the_loop() -> None:
-    p = SuturePlan(bite_width_mm=2.0, bite_depth_mm=1.0, thread_diameter_mm=0.2)
-    # E pi d^2 / 4 / (4 * 2 + 2 * 1): 3e6 kPa * 0.0314159 mm^2 / 10 mm = 9424.8 mN/mm
-    assert p.stiffness_mN_per_mm(5.0) == pytest.approx(3e6 * math.pi * 0.01 / 10)
-
-
-# -- the load after closure ---------------------------------------------------------------------
-
-
 def test_stretch_across_the_langer_line() -> None:
     # A wound along the Langer line (orientation 90: the line along y): a stretch across it
     # (90 degrees to the line) is along x.

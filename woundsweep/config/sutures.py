@@ -10,9 +10,6 @@ Defaults from surgical practice, with their sources:
   (`shared/notes/clinical.md`, standard texts; 3-5 mm from the edge, about 4-5 mm apart in
   the skin-closure guides, e.g. vetsurgeryonline.com "Simple interrupted pattern"): bite width
   3 mm, spacing equal to it.
-- A 4-0 nylon monofilament on the trunk (moderate tension; USP 4-0 diameter 0.150-0.199 mm),
-  Young's modulus of order 3 GPa: the member's axial stiffness is E A / l_loop, l_loop the
-  loop's length in the tissue and over the knot, 4 bite widths plus 2 bite depths.
 """
 
 from __future__ import annotations
@@ -25,8 +22,6 @@ from ..core.errors import WoundsweepError
 __all__ = ["BODY_SITES", "BodySite", "CaseError", "ItchLoad", "SuturePlan"]
 
 BITE_WIDTH_mm = 3.0
-THREAD_DIAMETER_mm = 0.175  # 4-0 (USP 0.150-0.199 mm)
-THREAD_MODULUS_kPa = 3.0e6  # nylon monofilament, of order 3 GPa
 
 
 class CaseError(WoundsweepError):
@@ -59,8 +54,6 @@ class SuturePlan:
     spacing_mm: float | None = None
     bite_width_mm: float = BITE_WIDTH_mm
     bite_depth_mm: float | None = None
-    thread_diameter_mm: float = THREAD_DIAMETER_mm
-    thread_modulus_kPa: float = THREAD_MODULUS_kPa
     positions_mm: tuple[float, ...] | None = None
 
     def __post_init__(self) -> None:
@@ -74,8 +67,6 @@ class SuturePlan:
         _positive("suture spacing_mm", self.spacing_mm, allow_none=True)
         _positive("bite_width_mm", self.bite_width_mm)
         _positive("bite_depth_mm", self.bite_depth_mm, allow_none=True)
-        _positive("thread_diameter_mm", self.thread_diameter_mm)
-        _positive("thread_modulus_kPa", self.thread_modulus_kPa)
 
     def positions(self, length_mm: float) -> tuple[float, ...]:
         """y (mm) of each suture on a wound of length ``length_mm`` (CaseError if one falls
@@ -102,12 +93,6 @@ class SuturePlan:
     def depth(self, dermal_thickness_mm: float) -> float:
         """The bite depth (mm)."""
         return self.bite_depth_mm if self.bite_depth_mm is not None else dermal_thickness_mm
-
-    def stiffness_mN_per_mm(self, dermal_thickness_mm: float) -> float:
-        """The member's axial stiffness E A / l_loop (module docstring)."""
-        area = math.pi * self.thread_diameter_mm**2 / 4
-        loop = 4 * self.bite_width_mm + 2 * self.depth(dermal_thickness_mm)
-        return self.thread_modulus_kPa * area / loop
 
 
 ITCH_KINDS = ("stretch", "shear")

@@ -2,10 +2,17 @@
 stage's multiblock, coloured by its cell data ``von_mises_kPa`` (range 0 to its p99), white
 background. NaN cells would be drawn in the lookup table's NaN colour (magenta, a hue the
 blue-to-red map never takes), so the image's magenta pixels, whatever their shading, count the
-NaN faces a user would see."""
+NaN faces a user would see.
+
+The rendering runs in a fresh interpreter: VTK's offscreen window aborts (std::bad_alloc in
+vtkRenderer::Render, VTK 9.7) in a process that has created a DOLFINx mesh, as the in-process
+finite-element tests before it do."""
 
 from __future__ import annotations
 
+import json
+import subprocess
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -17,7 +24,16 @@ NAN_RGB = (255, 0, 255)
 
 
 def render_surface(vtm: Path, png: Path, size: tuple[int, int] = (1100, 750)) -> dict[str, Any]:
-    """Render ``vtm``'s surface block to ``png``; returns counts of cells and pixels."""
+    """Render ``vtm``'s surface block to ``png`` in a fresh interpreter; returns counts of
+    cells and pixels."""
+    argv = [sys.executable, __file__, str(vtm), str(png), str(size[0]), str(size[1])]
+    res = subprocess.run(argv, capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0, res.stderr[-2000:]
+    return json.loads(res.stdout.strip().splitlines()[-1])
+
+
+def _render(vtm: Path, png: Path, size: tuple[int, int]) -> dict[str, Any]:
+    """`render_surface` in this process."""
     import vtk
     from vtkmodules.util.numpy_support import vtk_to_numpy
 
@@ -92,3 +108,9 @@ def render_surface(vtm: Path, png: Path, size: tuple[int, int] = (1100, 750)) ->
         "nan_pixels": int(nan.sum()),
         "coloured_fraction": float(1.0 - background.mean()),
     }
+
+
+if __name__ == "__main__":
+    vtm_arg, png_arg, width, height = sys.argv[1:5]
+    stats = _render(Path(vtm_arg), Path(png_arg), (int(width), int(height)))
+    print(json.dumps(stats))

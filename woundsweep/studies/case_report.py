@@ -267,8 +267,9 @@ def write_report(result: CaseResult, out: Path, command: str) -> Path:
         dense = np.diff(best.suture_y_mm)
         mid = 0.5 * (best.suture_y_mm[1:] + best.suture_y_mm[:-1])
         i = int(np.argmin(dense))
+        y_dense = float(np.round(mid[i], 1)) + 0.0  # + 0.0: no "-0.0" at the centre
         lines += [
-            f"Concentrate stitches around y = {mid[i]:+.1f} mm (spacing {dense[i]:.1f} mm there, "
+            f"Concentrate stitches around y = {y_dense:+.1f} mm (spacing {dense[i]:.1f} mm there, "
             f"{dense.max():.1f} mm at the widest). Placed at {_positions(best)} mm, the forces "
             f"are {_forces_row(best)} mN: largest/smallest {sp:.2f} (as placed: {spread:.2f}).",
         ]

@@ -368,3 +368,36 @@ def test_prescribed_values_couple_into_the_free_dofs(symmetric: bool) -> None:
     np.testing.assert_allclose(p.u, [*expected, 0.7], rtol=0, atol=1e-12)
     assert res.iterations == 2
     assert newton._pc_kind == ("cholesky" if symmetric else "lu")
+
+
+class _Far(_Small):
+    """R(u) = u - 100 from u = 0: linear, but the strain limit (0.5 per update) makes every
+    update 0.5 long, a steady descent of 0.5 % of the residual per update."""
+
+    def _grad(self) -> np.ndarray:
+        return self.u - 100.0
+
+    def jacobian(self, A: Any) -> None:
+        A.zeroEntries()
+        A.setValues([0], [0], [1.0])
+        A.assemble()
+
+
+@pytest.mark.fem
+def test_a_slow_descent_stalls_only_without_the_residual_rule() -> None:
+    from petsc4py import PETSc
+
+    from woundsweep.solver.newton import STALL_UPDATES, NewtonSolver, Policy
+
+    st = NewtonSettings(rtol=0.0, atol=1e-6, stol=1e-6)
+    for policy, steps in ((Policy(st), st.max_iterations), (Policy.contact(st), STALL_UPDATES)):
+        problem = _Far([0.0])
+        A = PETSc.Mat().createAIJ([1, 1], nnz=1)
+        A.setUp()
+        A.setValues([0], [0], [1.0])
+        A.assemble()
+        res = NewtonSolver(problem, A, st).solve(
+            np.zeros(0, dtype=np.int32), np.zeros(0), force_scale=100.0, policy=policy
+        )
+        assert res.status == MAX_ITERATIONS and res.iterations == steps
+        assert problem.u[0] == pytest.approx(0.5 * steps, rel=0.01)

@@ -23,12 +23,13 @@ from ..core.errors import WoundsweepError
 # The manifest columns a geometry's cost estimate reads besides GEOMETRY_KEYS.
 _SPEC_COLUMNS = (*DERIVED, "job_index")
 # CPU per job ~ (size-law cells)^COST_EXPONENT x SHAPE_COST[shape]: least squares on the log
-# of the mean CPU of each geometry's nine jobs (15 P2 geometries of the paper grid, 135 jobs,
-# six random shards of 486): residual sd 0.27 in log CPU, against 0.37 for the cell estimate
-# alone. A wedge's stage 2 and contact stages take more Newton steps than a cylinder's of as
-# many cells. Shapes not in the table (the fusiform excision) are not fitted: weight 1.
-COST_EXPONENT = 0.73
-SHAPE_COST = {"cylindrical": 1.0, "wedge": 1.8}
+# of the mean CPU of each geometry's nine jobs (28 P2 geometries of the paper grid, 252 jobs of
+# eleven random shards of 486): residual sd 0.31 in log CPU, against 0.47 for the cell
+# estimate alone. A wedge's stage 2 and contact stages take more Newton steps than a
+# cylinder's of as many cells. Shapes not in the table (the fusiform excision) are not
+# fitted: weight 1.
+COST_EXPONENT = 0.65
+SHAPE_COST = {"cylindrical": 1.0, "wedge": 1.5}
 
 __all__ = [
     "COST_EXPONENT",

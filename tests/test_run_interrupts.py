@@ -21,11 +21,18 @@ from woundsweep.execution.classify import classify
 from woundsweep.execution.process import Attempt, Job
 
 
+def _default_sigint() -> None:
+    # The runner starts as from a shell, with Ctrl-C's default action: a child inherits an
+    # ignored SIGINT, and a process that starts with it ignored rightly keeps ignoring it.
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def _run(rd: Path, fault: str, *args: str) -> subprocess.Popen[str]:
     env = {**os.environ, "WOUNDSWEEP_FAULT": fault}
     return subprocess.Popen(
         [*WS, "run", str(rd), "--no-progress", "--no-warmup", *args],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
+        preexec_fn=_default_sigint,
     )  # fmt: skip
 
 

@@ -140,6 +140,26 @@ class _Small:
         return 1.0
 
 
+class _UnitSlope(_Small):
+    """A one-dof problem whose Jacobian is 1 everywhere (subclasses give R)."""
+
+    def jacobian(self, A: Any) -> None:
+        A.zeroEntries()
+        A.setValues([0], [0], [1.0])
+        A.assemble()
+
+
+def _unit_matrix() -> Any:
+    """A 1 x 1 assembled PETSc matrix holding 1 (the one-dof solves' tangent)."""
+    from petsc4py import PETSc
+
+    A = PETSc.Mat().createAIJ([1, 1], nnz=1)
+    A.setUp()
+    A.setValues([0], [0], [1.0])
+    A.assemble()
+    return A
+
+
 class _Arctan(_Small):
     """R(u) = atan(u) componentwise, E = sum u atan(u) - log(1 + u^2) / 2: from |u| > 1.39
     the full Newton step overshoots, so the first updates are damped."""
@@ -249,23 +269,18 @@ def test_only_the_end_of_a_ramp_is_solved_to_the_full_tolerance() -> None:
     assert seen == [(0.25, True), (0.75, True), (1.0, False)]
 
 
-class _Jump(_Small):
+class _Jump(_UnitSlope):
     """R(u) = u + sign(u): no root, and a full Newton step from u = 1 lands on u = -1 and
     back, the 2-cycle a semi-smooth step can fall into."""
 
     def _grad(self) -> np.ndarray:
         return self.u + np.sign(self.u)
 
-    def jacobian(self, A: Any) -> None:
-        A.zeroEntries()
-        A.setValues([0], [0], [1.0])
-        A.assemble()
-
     def max_strain(self, du: np.ndarray) -> float:
         return 0.0
 
 
-class _Ring(_Small):
+class _Ring(_UnitSlope):
     """R(u) = u - r(u), r = 2, 3, 4, 1 on the unit cells around u = 1, 2, 3, 4: no root, and
     full Newton steps from u = 1 go round 1 -> 2 -> 3 -> 4 -> 1, a 4-cycle (the semi-smooth
     contact step's active set can cycle with period 4)."""
@@ -273,11 +288,6 @@ class _Ring(_Small):
     def _grad(self) -> np.ndarray:
         cell = int(np.clip(np.floor(self.u[0] - 0.5), 0, 3))  # 0..3 around u = 1..4
         return self.u - (1.0 + (cell + 1) % 4)
-
-    def jacobian(self, A: Any) -> None:
-        A.zeroEntries()
-        A.setValues([0], [0], [1.0])
-        A.assemble()
 
     def max_strain(self, du: np.ndarray) -> float:
         return 0.0
@@ -301,7 +311,6 @@ class _Cusp(_Small):
 
 @pytest.mark.fem
 def test_a_cycle_stalls_the_solve_and_a_converging_oscillation_does_not() -> None:
-    from petsc4py import PETSc
 
     from woundsweep.solver.newton import STALL_UPDATES, NewtonSolver, Policy
 
@@ -310,10 +319,7 @@ def test_a_cycle_stalls_the_solve_and_a_converging_oscillation_does_not() -> Non
     # cusp's oscillation converges.
     for problem, status in ((_Jump([1.0]), MAX_ITERATIONS), (_Ring([1.0]), MAX_ITERATIONS),
                             (_Cusp([1.0]), CONVERGED)):  # fmt: skip
-        A = PETSc.Mat().createAIJ([1, 1], nnz=1)
-        A.setUp()
-        A.setValues([0], [0], [1.0])
-        A.assemble()
+        A = _unit_matrix()
         res = NewtonSolver(problem, A, st).solve(
             np.zeros(0, dtype=np.int32), np.zeros(0), force_scale=10.0, policy=Policy.contact(st)
         )
@@ -370,32 +376,23 @@ def test_prescribed_values_couple_into_the_free_dofs(symmetric: bool) -> None:
     assert newton._pc_kind == ("cholesky" if symmetric else "lu")
 
 
-class _Far(_Small):
+class _Far(_UnitSlope):
     """R(u) = u - 100 from u = 0: linear, but the strain limit (0.5 per update) makes every
     update 0.5 long, a steady descent of 0.5 % of the residual per update."""
 
     def _grad(self) -> np.ndarray:
         return self.u - 100.0
 
-    def jacobian(self, A: Any) -> None:
-        A.zeroEntries()
-        A.setValues([0], [0], [1.0])
-        A.assemble()
-
 
 @pytest.mark.fem
 def test_a_slow_descent_stalls_only_without_the_residual_rule() -> None:
-    from petsc4py import PETSc
 
     from woundsweep.solver.newton import STALL_UPDATES, NewtonSolver, Policy
 
     st = NewtonSettings(rtol=0.0, atol=1e-6, stol=1e-6)
     for policy, steps in ((Policy(st), st.max_iterations), (Policy.contact(st), STALL_UPDATES)):
         problem = _Far([0.0])
-        A = PETSc.Mat().createAIJ([1, 1], nnz=1)
-        A.setUp()
-        A.setValues([0], [0], [1.0])
-        A.assemble()
+        A = _unit_matrix()
         res = NewtonSolver(problem, A, st).solve(
             np.zeros(0, dtype=np.int32), np.zeros(0), force_scale=100.0, policy=policy
         )

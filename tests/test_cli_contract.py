@@ -73,3 +73,40 @@ def test_log_axes_plain_numbers_no_overlap(lo: float, hi: float) -> None:
         for i in range(len(boxes)):
             for j in range(i + 1, len(boxes)):
                 assert not boxes[i].overlaps(boxes[j]), (texts[i], texts[j])
+
+
+_THREADS = """
+import json, sys
+from woundsweep.cli import cli
+cli.get_command(None, sys.argv[1])
+import numpy, threadpoolctl
+print(json.dumps([i["num_threads"] for i in threadpoolctl.threadpool_info()
+                  if i["user_api"] == "blas"]))
+"""
+
+
+@pytest.mark.parametrize("command", ["solve", "converge", "case", "run"])
+def test_solving_commands_load_a_serial_blas(command: str) -> None:
+    """The thread count is fixed when numpy loads: the solving commands set it first (a
+    threaded OpenBLAS costs seconds on the solver's batched 3 x 3 inverses on busy cores)."""
+    import os
+    import subprocess
+    import sys
+
+    env = {k: v for k, v in os.environ.items() if not k.endswith("_NUM_THREADS")}
+    out = subprocess.run(
+        [sys.executable, "-c", _THREADS, command],
+        env=env,
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout
+    assert json.loads(out) == [1]
+
+
+def test_other_commands_keep_the_blas_threads(monkeypatch) -> None:
+    from woundsweep.cli import cli
+
+    monkeypatch.delenv("OPENBLAS_NUM_THREADS", raising=False)
+    cli.get_command(None, "generate")
+    assert "OPENBLAS_NUM_THREADS" not in __import__("os").environ

@@ -19,7 +19,7 @@ import click
 from . import __version__
 from .core.errors import Interrupted, WoundsweepError, one_line, report
 
-__all__ = ["COMMANDS", "main"]
+__all__ = ["COMMANDS", "SERIAL_COMMANDS", "main", "serial_blas"]
 
 # name -> (module, one-line help). Only commands that work are listed.
 COMMANDS: dict[str, tuple[str, str]] = {
@@ -112,6 +112,20 @@ except (TypeError, ValueError):  # pragma: no cover
     _METAVAR_TAKES_CTX = False
 
 
+# Commands whose processes solve one job at a time: BLAS and OpenMP run one thread. A
+# threaded OpenBLAS spends its time waking threads on the solver's batches of 3 x 3 matrices
+# (seconds a call when the cores are busy with sibling jobs), and the thread count is fixed
+# when numpy loads, so it is set before the command's module is imported.
+SERIAL_COMMANDS = frozenset({"solve", "converge", "case", "run"})
+_THREAD_VARS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
+
+
+def serial_blas() -> None:
+    """One BLAS / OpenMP thread unless the environment says otherwise."""
+    for var in _THREAD_VARS:
+        os.environ.setdefault(var, "1")
+
+
 class LazyGroup(click.Group):
     def resolve_command(
         self, ctx: click.Context, args: list[str]
@@ -129,6 +143,8 @@ class LazyGroup(click.Group):
     def get_command(self, ctx: click.Context, name: str) -> click.Command | None:
         if name not in COMMANDS:
             return None
+        if name in SERIAL_COMMANDS:
+            serial_blas()
         return importlib.import_module(COMMANDS[name][0]).cmd
 
     def format_commands(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:

@@ -11,7 +11,6 @@ input (one line); 3 a solve did not converge; 4 the excision could not be meshed
 from __future__ import annotations
 
 import logging
-import os
 import shlex
 import sys
 from pathlib import Path
@@ -149,8 +148,6 @@ def cmd(out: Path, length_mm: float, width_mm: float | None, angle_deg: float, s
         length_mm, width_mm, angle_deg, site, dermis_mm, subcutis_mm, depth_mm, skin, plan,
         ItchLoad(itch_strain, itch_angle_deg, itch_kind), mesh_factor, element,
     )  # fmt: skip
-    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-    os.environ.setdefault("OMP_NUM_THREADS", "1")
     logging.getLogger().setLevel(logging.WARNING)
     from ..studies.case import run_case
     from ..studies.case_report import write_report

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import logging
 import math
-import os
 from pathlib import Path
 from typing import Any
 
@@ -150,8 +149,6 @@ def cmd(
     all of them (order, limit, scatter, each level's uncertainty). Writes
     RUN_DIR/convergence/job_<N>.json and job_<N>.png.
     """
-    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-    os.environ.setdefault("OMP_NUM_THREADS", "1")
     stages = parse_stage_range(stages_text, SolverError)
     from ..studies.convergence import check_refinements, convergence_study, parse_factors
 

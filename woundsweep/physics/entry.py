@@ -10,7 +10,6 @@ geometry that cannot be meshed).
 from __future__ import annotations
 
 import logging
-import os
 import sys
 from pathlib import Path
 
@@ -66,9 +65,6 @@ def solve(
     With ``fingerprint`` (a runner's job) the run's sweep, loaded once here and solved with,
     must give the job that result fingerprint (`SweepChanged` otherwise, before any work)."""
     maybe_inject(job_index)  # test-only fault switch (WOUNDSWEEP_FAULT)
-    # Each job is one serial process; threaded BLAS would only fight the sibling workers.
-    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-    os.environ.setdefault("OMP_NUM_THREADS", "1")
     if out is not None:
         try:
             check_output_file(out)

@@ -33,11 +33,16 @@ class NewtonSettings:
 @dataclasses.dataclass(frozen=True)
 class SolverSettings:
     """The element's degree (1: P1, 2: P2), the quadrature degree of the energy and residual,
-    and `NewtonSettings` (flat in the sweep file, beside the other two keys)."""
+    `NewtonSettings` (flat in the sweep file, beside the other keys) and whether Newton's
+    linear solves use the job's symmetry."""
 
     element_degree: int = 1
     quadrature_degree: int = 1
     newton: NewtonSettings = NewtonSettings()
+    # Newton's linear solves in the symmetric subspace of a job whose mesh, materials and
+    # loads share the patch's mirror (or half-turn) symmetry (`woundsweep.solver.symmetry`):
+    # the same steps on a quarter (half) of the unknowns.
+    symmetry: bool = True
 
     @property
     def form_quadrature_degree(self) -> int:
@@ -50,6 +55,7 @@ class SolverSettings:
         return {
             "element_degree": self.element_degree,
             "quadrature_degree": self.quadrature_degree,
+            "symmetry": self.symmetry,
             **dataclasses.asdict(self.newton),
         }
 
@@ -60,6 +66,7 @@ class SolverSettings:
             int(d.get("element_degree", cls.element_degree)),
             int(d.get("quadrature_degree", cls.quadrature_degree)),
             NewtonSettings(**newton),
+            bool(d.get("symmetry", cls.symmetry)),
         )
 
 

@@ -211,7 +211,11 @@ def _merge(path: str, key: str, default: Any, given: Any) -> Any:
         if not isinstance(given, list) or len(given) != len(default):
             raise SweepError(path, key, f"expected a list of {len(default)} numbers, got {given!r}")
         return [_merge(path, f"{key}[{i}]", d, g) for i, (d, g) in enumerate(zip(default, given))]
-    if isinstance(default, bool) or not is_number(given):
+    if isinstance(default, bool):
+        if not isinstance(given, bool):
+            raise SweepError(path, key, f"expected true or false, got {given!r}")
+        return given
+    if not is_number(given):
         raise SweepError(path, key, f"expected a number, got {given!r}")
     if isinstance(default, int) and not float(given).is_integer():
         raise SweepError(path, key, f"expected an integer, got {given!r}")

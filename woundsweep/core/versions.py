@@ -18,7 +18,7 @@ __all__ = [
 RESULT_FORMAT_VERSION = 4
 # What the six stages solve (docs/model.md, "The six stages": their loads, the closure load of
 # stages 3-6, contact and tie). Part of a result's fingerprint.
-STAGES_VERSION = 2
+STAGES_VERSION = 3
 # The geometry and the mesh size law (`woundsweep.mesh.sizing`, the closure zone imprinted on
 # the wound surface, edges scaled with the element degree). Cached meshes and results of
 # another version are rebuilt.

@@ -32,6 +32,7 @@ from ..core.schema import (
     Y_MAX,
     Y_MIN,
 )
+from ..solver.symmetry import Isometry, SymmetryBasis, mirror_node_map, symmetry_basis
 from . import compat
 from .element import Element
 
@@ -99,6 +100,7 @@ class WoundDomain:
         self.cell_nodes = compat.cell_dofs(self.V)  # (m, 4 or 10) node indices, cell order
         self.cell_vertices = self.cell_nodes[:, :4]
         self._prepare_kinematics()
+        self._symmetry: dict[bool, SymmetryBasis | None] = {}
         self.element = Element(self.X, self.cell_nodes, self.Dm_inv)
         self._classify(facets, ftags)
 
@@ -198,7 +200,9 @@ class WoundDomain:
         return zf[left], zf[~left]
 
     def _point_constraints(self) -> None:
-        """Minimal in-plane gauge for stages 2+: nodes of the deep face near its centre line."""
+        """In-plane gauge for stages 2+: nodes of the deep face near its centre line. The
+        rotation is held at two nodes, mirror images about y = y_c, so the gauge shares the
+        patch's mirror and half-turn symmetries (`symmetry`)."""
         zb = self.X[self.bottom_nodes]
 
         def nearest(target: tuple[float, float]) -> int:
@@ -207,11 +211,37 @@ class WoundDomain:
 
         self.pin_a = nearest((self.x_c, self.y_c))
         self.pin_b = nearest((self.x_c, self.y_c + 0.5 * self.half_length_y))
+        self.pin_c = nearest((self.x_c, self.y_c - 0.5 * self.half_length_y))
+
+    def symmetry(self, mirrors: bool) -> SymmetryBasis | None:
+        """The basis of the displacement fields symmetric under the patch's mirrors about
+        x = x_c and y = y_c (``mirrors``), or under the half-turn about their common line;
+        None when the mesh does not map onto itself."""
+        if mirrors not in self._symmetry:
+            c = np.array([2 * self.x_c, 2 * self.y_c, 0.0])
+            flips = [np.array([-1.0, 1.0, 1.0]), np.array([1.0, -1.0, 1.0])]
+            if not mirrors:
+                flips = [flips[0] * flips[1]]
+            gens = []
+            for f in flips:
+                image = np.where(f < 0, c - self.X, self.X)
+                nodes = mirror_node_map(self.X, image, 1e-9 * self.ell)
+                if nodes is None:
+                    gens = []
+                    break
+                gens.append(Isometry(nodes, f))
+            self._symmetry[mirrors] = symmetry_basis(gens) if gens else None
+        return self._symmetry[mirrors]
 
     def pin_rows(self) -> np.ndarray:
-        """Dofs of the point constraints: u_x, u_y at ``pin_a``, u_x at ``pin_b``."""
+        """Dofs of the point constraints: u_x, u_y at ``pin_a``, u_x at ``pin_b`` and
+        ``pin_c``."""
         return np.concatenate(
-            [dof_rows([self.pin_a], 0), dof_rows([self.pin_a], 1), dof_rows([self.pin_b], 0)]
+            [
+                dof_rows([self.pin_a], 0),
+                dof_rows([self.pin_a], 1),
+                dof_rows([self.pin_b, self.pin_c], 0),
+            ]
         )
 
     def gauge_rows(self) -> np.ndarray:

@@ -30,6 +30,7 @@ from ..contact import GPA_TO_KPA, ContactModel, FlankContact, ZoneTie, split_wou
 from ..core.schema import DERMIS, STAGES, SUBCUTIS, StageStatus, start_stage
 from ..solver.continuation import ContinuationResult, LoadState, continuation
 from ..solver.newton import NewtonSolver, Policy
+from ..solver.symmetry import SymmetryBasis
 from .closure import ClosureLine
 from .domain import WoundDomain, dof_rows
 from .forms import WoundForms
@@ -96,6 +97,8 @@ class WoundModel:
         self.forms = WoundForms(d, solver.form_quadrature_degree, jit)
         self.problem = WoundProblem(d, self.forms, self.contact, self.tie)
         self.newton = NewtonSolver(self.problem, self.problem.A, solver.newton)
+        # The sutured closure's stitches need not share the patch's symmetry.
+        self.use_symmetry = solver.symmetry and tie_zone and d.has_wound
         self.materials: JobMaterials | None = None
         self.homogeneous: dict[int, HomogeneousState] = {}
         self.results: dict[int, StageOutcome] = {}
@@ -103,6 +106,16 @@ class WoundModel:
         # The closure's nodal reactions at the end of stage 2 (flat dofs, mN): the closing
         # load of stages 3-6. None before stage 2.
         self.closing_forces: np.ndarray | None = None
+
+    def _symmetry(self, materials: JobMaterials) -> SymmetryBasis | None:
+        """The job's symmetry: both mirrors with the Langer line along x or y, else the
+        half-turn about the wound's vertical centre line (the mesh, the stages' loads and
+        the tie share both)."""
+        if not self.use_symmetry:
+            return None
+        a1 = np.asarray(materials.dermis.a1, dtype=float)
+        mirrors = bool(min(abs(a1[0]), abs(a1[1])) < 1e-12)
+        return self.domain.symmetry(mirrors)
 
     @property
     def settings(self) -> NewtonSettings:
@@ -123,6 +136,7 @@ class WoundModel:
         """Assign a job's material constants (no recompilation) and reset the state."""
         self.materials = materials
         self.forms.set_materials(materials)
+        self.newton.set_symmetry(self._symmetry(materials))
         self.homogeneous = {
             DERMIS: homogeneous_state(materials.dermis, materials.tsf),
             SUBCUTIS: homogeneous_state(materials.subcutis, materials.tsf),

@@ -1,7 +1,9 @@
 """Newton's method with adaptive relaxation over assembled PETSc objects.
 
 One Newton step solves ``J du = -R`` (MUMPS, KSP ``preonly``: LDL^T for a symmetric tangent,
-else LU) and applies ``u += gamma du``.
+else LU) and applies ``u += gamma du``. With a symmetry basis P (`NewtonSolver.set_symmetry`)
+the factorised matrix is P^T J P and du = P x (`woundsweep.solver.symmetry`); every step is
+checked against the full J.
 The relaxation factor gamma follows a FIRE-like rule: it shrinks (x0.5) when an update is too
 large (its largest cellwise displacement-gradient increment exceeds ``max_strain_step``), when
 it would invert an element (min J <= 0), or when the residual grows; it grows (x2, up to 1)
@@ -51,6 +53,7 @@ from petsc4py import PETSc
 
 from ..config.solver import NewtonSettings
 from ..core.schema import StageStatus
+from .symmetry import Subspace, SymmetryBasis
 
 __all__ = ["Multipliers", "NewtonResult", "NewtonSolver", "NonlinearProblem", "Policy"]
 
@@ -227,6 +230,14 @@ class NewtonSolver:
         self._factored = False
         self._pc_kind = "lu"
         self.gamma = 1.0
+        # The symmetric subspace (`set_symmetry`), or None: the full space.
+        self._sub: Subspace | None = None
+
+    def set_symmetry(self, basis: SymmetryBasis | None) -> None:
+        """Solve the linear systems in the span of ``basis.P`` (`woundsweep.solver.symmetry`),
+        or in the full space (None)."""
+        self._sub = None if basis is None else Subspace(basis)
+        self._factored = False
 
     def reset(self) -> None:
         """Forget the adaptive state at the start of a stage (the relaxation and the carried
@@ -272,6 +283,10 @@ class NewtonSolver:
             self.A.zeroRowsColumns(rows, diag=1.0)
         else:
             self.A.zeroRows(rows, diag=1.0)
+        op = self.A
+        if self._sub is not None:
+            op, new = self._sub.operator(self.A)
+            self._factored = self._factored and not new  # a new matrix: analysed again
         t1 = time.perf_counter()
         if kind != self._pc_kind:
             self.ksp.getPC().setType(kind)
@@ -279,7 +294,7 @@ class NewtonSolver:
             self._pc_kind = kind
             self._factored = False
         if not self._factored:
-            self.ksp.setOperators(self.A)
+            self.ksp.setOperators(op)
             pc = self.ksp.getPC()
             pc.setFactorSetUpSolverType()
             F = pc.getFactorMatrix()
@@ -296,7 +311,10 @@ class NewtonSolver:
         meaningless answer, so the true residual ||A du - b|| is checked (one product).
         """
         self.b.getArray()[:] = rhs
-        self.ksp.solve(self.b, self.dx)
+        if self._sub is None:
+            self.ksp.solve(self.b, self.dx)
+        else:
+            self._sub.solve(self.ksp, self.b, self.dx)
         if self.ksp.getConvergedReason() < 0:
             return None
         du = self.dx.getArray(readonly=True).copy()
@@ -305,7 +323,11 @@ class NewtonSolver:
         check = self.b.duplicate()
         self.A.mult(self.dx, check)
         err = np.linalg.norm(check.getArray(readonly=True) - rhs)
-        return du if err <= LINEAR_RTOL * max(np.linalg.norm(rhs), 1e-300) else None
+        # A symmetric step cannot remove the right-hand side's antisymmetric part (rounding
+        # of a symmetric state, relatively large only where the residual is near zero); a
+        # problem that is not symmetric leaves a larger error and fails.
+        floor = 0.0 if self._sub is None else self._sub.antisymmetric_norm(rhs)
+        return du if err <= LINEAR_RTOL * max(np.linalg.norm(rhs), 1e-300) + floor else None
 
     # -- the solve ----------------------------------------------------------------------
 

@@ -1,10 +1,11 @@
 """Deterministic partition of a manifest into N shards, balanced by an estimated cost.
 
-Jobs that share a geometry stay in one shard (they reuse its cached mesh) whenever there are
-at least as many geometries as shards; otherwise jobs are spread one by one. Groups are
-assigned longest-first to the currently lightest shard (LPT), ties broken by shard number and
-by ``geometry_id``/``job_index``, so the result depends only on the manifest and N: every
-node of a cluster computes the same partition without talking to the others.
+Jobs are assigned one by one, longest-first to the currently lightest shard (LPT), ties broken
+by shard number and by ``job_index``, so the result depends only on the manifest and N: every
+node of a cluster computes the same partition without talking to the others. A shard holds
+jobs of many geometries, so the estimate's error for one geometry (a log-CPU sd of about 0.24)
+averages out over a shard; a geometry's mesh is built by each shard that needs it (about
+0.1 s against seconds per job) or read from the run's mesh cache.
 """
 
 from __future__ import annotations
@@ -22,17 +23,20 @@ from ..core.errors import WoundsweepError
 
 # The manifest columns a geometry's cost estimate reads besides GEOMETRY_KEYS.
 _SPEC_COLUMNS = (*DERIVED, "job_index")
-# CPU per job ~ (size-law cells)^COST_EXPONENT x SHAPE_COST[shape]: least squares on the log
-# of the mean CPU of each geometry's nine jobs (28 P2 geometries of the paper grid, 252 jobs of
-# eleven random shards of 486): residual sd 0.31 in log CPU, against 0.47 for the cell
-# estimate alone. A wedge's stage 2 and contact stages take more Newton steps than a
-# cylinder's of as many cells. Shapes not in the table (the fusiform excision) are not
-# fitted: weight 1.
-COST_EXPONENT = 0.65
-SHAPE_COST = {"cylindrical": 1.0, "wedge": 1.5}
+# CPU per job ~ (size-law cells)^COST_EXPONENT x SHAPE_COST[shape] x (OFF_AXIS_COST when the
+# Langer line is not along x or y): least squares on log CPU per job (189 P2 jobs of nine random
+# shards of 486, 21 geometries): residual sd 0.33 per job, 0.24 for a geometry's mean. A
+# wedge's stage 2 and contact stages take more Newton steps than a cylinder's of as many
+# cells; off the axes a job keeps only the half-turn of its symmetry (half the unknowns in the
+# Newton solves against a quarter; docs/model.md, "Newton's method"). Shapes not in the table
+# (the fusiform excision) are not fitted: weight 1.
+COST_EXPONENT = 0.59
+SHAPE_COST = {"cylindrical": 1.0, "wedge": 1.55}
+OFF_AXIS_COST = 1.28
 
 __all__ = [
     "COST_EXPONENT",
+    "OFF_AXIS_COST",
     "SHAPE_COST",
     "Shard",
     "estimate_cells",
@@ -91,8 +95,11 @@ def estimate_cells(manifest: pd.DataFrame) -> np.ndarray:
 
 def estimate_cost(manifest: pd.DataFrame) -> np.ndarray:
     """Relative CPU cost of each job: ``estimate_cells ** COST_EXPONENT`` times its shape's
-    ``SHAPE_COST`` (3 significant digits)."""
+    ``SHAPE_COST`` and, for a Langer line off the x and y axes, ``OFF_AXIS_COST`` (3
+    significant digits)."""
     weight = manifest["wound_shape"].map(SHAPE_COST).fillna(1.0).to_numpy(dtype=float)
+    off_axis = np.mod(manifest["orientation_deg"].to_numpy(dtype=float), 90.0) != 0.0
+    weight = weight * np.where(off_axis, OFF_AXIS_COST, 1.0)
     cost = estimate_cells(manifest) ** COST_EXPONENT * weight
     return np.array([float(f"{c:.3g}") for c in cost])
 
@@ -106,22 +113,13 @@ def partition(manifest: pd.DataFrame, count: int) -> list[np.ndarray]:
         raise ValueError("shard count must be >= 1")
     jobs = manifest["job_index"].to_numpy(np.int64)
     cost = estimate_cost(manifest)
-    if manifest["geometry_id"].nunique() >= count:
-        keys = manifest["geometry_id"].to_numpy(str)
-    else:
-        keys = np.array([f"{j:012d}" for j in jobs])
-    groups: dict[str, list[int]] = {}
-    gcost: dict[str, float] = {}
-    for key, j, c in zip(keys, jobs, cost):
-        groups.setdefault(key, []).append(int(j))
-        gcost[key] = gcost.get(key, 0.0) + float(c)
-    order = sorted(groups, key=lambda k: (-gcost[k], k))
+    order = sorted(range(len(jobs)), key=lambda i: (-cost[i], jobs[i]))
     heap = [(0.0, s) for s in range(count)]  # (assigned cost, shard): lightest, then lowest index
     members: list[list[int]] = [[] for _ in range(count)]
-    for key in order:
+    for i in order:
         load, s = heapq.heappop(heap)
-        members[s].extend(groups[key])
-        heapq.heappush(heap, (load + gcost[key], s))
+        members[s].append(int(jobs[i]))
+        heapq.heappush(heap, (load + float(cost[i]), s))
     return [np.array(sorted(m), dtype=np.int64) for m in members]
 
 

@@ -283,11 +283,11 @@ class NewtonSolver:
             self.A.zeroRowsColumns(rows, diag=1.0)
         else:
             self.A.zeroRows(rows, diag=1.0)
+        t1 = time.perf_counter()  # the restriction P^T J P counts as factorisation
         op = self.A
         if self._sub is not None:
             op, new = self._sub.operator(self.A)
             self._factored = self._factored and not new  # a new matrix: analysed again
-        t1 = time.perf_counter()
         if kind != self._pc_kind:
             self.ksp.getPC().setType(kind)
             self.ksp.getPC().setFactorSolverType("mumps")

@@ -209,7 +209,12 @@ def test_unconverged_contact_stage_is_recorded_as_such(deep_wedge_mesh) -> None:
     assert k0 == pytest.approx(CONTACT_START_kPa)
     np.testing.assert_allclose(m.u, m.displacements[2])
     c = m.contact
+    # The stage's forces are those of that state at its penalty, not at the stage's target.
+    assert r4.extra["contact_penalty_kPa"] == pytest.approx(k0)
+    at_target = c.summary(m.u).contact_force_mN
     c.k_V_kPa = k0
+    assert r4.result.contact_force_mN == pytest.approx(c.summary(m.u).contact_force_mN)
+    assert r4.result.contact_force_mN != pytest.approx(at_target)
     m.problem.jacobian(m.problem.A)
     ai, aj, av = m.problem.A.getValuesCSR()
     free = np.ones(len(ai) - 1, dtype=bool)

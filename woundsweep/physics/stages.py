@@ -343,6 +343,19 @@ class WoundModel:
             # Stalled at a stable state, or at a limit point of the path? (stability.py)
             k_last = k_from ** (1.0 - res.load_reached) * k_to**res.load_reached
             diag.update(self._stability(rows, k_last))
+            # The forces of the state reached, at the penalty it was reached with.
+            c.k_V_kPa = k_last
+        try:
+            diag.update(self._contact_diagnostics(rows, u, c))
+        finally:
+            c.k_V_kPa = k_to
+        return res, diag
+
+    def _contact_diagnostics(
+        self, rows: np.ndarray, u: np.ndarray, c: ContactModel
+    ) -> dict[str, float]:
+        """Pin reaction, tie and contact forces and penetration of ``u`` at ``c``'s penalty."""
+        diag: dict[str, float] = {}
         r = self.problem.residual_array()
         diag["pin_reaction_max_mN"] = self._pin_reaction(r)
         diag["contact_penalty_kPa"] = c.k_V_kPa
@@ -362,7 +375,7 @@ class WoundModel:
                 "contact_searches": searches,
             }
         )
-        return res, diag
+        return diag
 
     def _contact_load(
         self, stage: int, rows: np.ndarray

@@ -5,13 +5,8 @@ in plan to its outline, combined with the height below its floor), zeta = max(0,
 below the layer interface in dermal thicknesses, m the mesh size factor,
 s = (0.5 / m)^(2/3) and p the element degree::
 
-    h = p * s * min(h_w + 0.5 D,  (0.7 t_d + 0.1 D) (1 + 0.75 zeta),  L / 4,  h_w / 2 + D_a),
+    h = p * s * min(h_w + 0.5 D,  (0.7 t_d + 0.1 D) (1 + 0.75 zeta),  L / 4),
     h_w = min(t_d / 3, w / 6)
-
-with D_a the distance to a wedge's apex line (no such term for the other shapes): the apex is
-a re-entrant edge, where the open wound's stress concentrates; without this term stage 1's
-p99 of a wedge lies up to 19 % off its limit at m = 0.3 (docs/validation.md, "Mesh
-convergence").
 
 The law sets the spacing of the displacement's nodes: a P2 element's edge holds a node at
 its midpoint, so P2 edges are twice as long as P1's for the same spacing, and a mesh size
@@ -26,8 +21,8 @@ gives a uniformly finer field. Fine at the wound (h_w resolves both the dermis a
 width), graded away from it, finer in the dermis than in the subcutis, coarser with depth,
 and never coarser than s L / 4 (eight cells along the wound length at m = 0.5). On the 1,296
 paper geometries with the default closure zone (benchmarks/bench_geometry.py --all): min /
-median / max cells 2.8k / 4.7k / 9.0k at m = 0.3, 4.9k / 8.0k / 16.6k at m = 0.5,
-7.4k / 12.1k / 25.9k at m = 0.7; the count rises strictly with m for every geometry. Minimum
+median / max cells 2.7k / 4.5k / 8.7k at m = 0.3, 4.6k / 7.6k / 15.4k at m = 0.5,
+7.2k / 11.6k / 24.8k at m = 0.7; the count rises strictly with m for every geometry. Minimum
 SICN is 0.050 over the grid; the few meshes below 0.1 are cylinders whose bottom is tangent to (or within 2% of) the
 layer interface, where the dermis between wound and subcutis thins to a cusp.
 """
@@ -77,8 +72,6 @@ SIZE_LAW: Mapping[str, float] = MappingProxyType(
         "layer_growth": 0.1,  # slow lateral coarsening far from the wound
         "depth_growth": 0.75,  # relative growth per t_d below the interface
         "patch_fraction": 0.25,  # h <= L / 4
-        "apex_per_wound": 0.5,  # at a wedge's apex, in h_w
-        "apex_growth": 1.0,  # dh/dD away from the apex
     }
 )
 
@@ -110,11 +103,7 @@ def mesh_size_mm(spec: GeometrySpec, x: float, y: float, z: float) -> float:
         1.0 + SIZE_LAW["depth_growth"] * zeta
     )
     cap = SIZE_LAW["patch_fraction"] * spec.patch_half_length_mm
-    h = min(near, layer, cap)
-    if spec.shape == "wedge":
-        apex = math.hypot(x - spec.wound_width_mm / 2, z + spec.wound_depth_mm)
-        h = min(h, SIZE_LAW["apex_per_wound"] * wound_size(spec) + SIZE_LAW["apex_growth"] * apex)
-    return size_scale(spec.mesh_size_factor, spec.element_degree) * h
+    return size_scale(spec.mesh_size_factor, spec.element_degree) * min(near, layer, cap)
 
 
 def estimate_cells(spec: GeometrySpec) -> float:

@@ -15,7 +15,7 @@ __all__, __getattr__, __dir__ = lazy_exports(
     {
         "continuation": ("ContinuationResult", "LoadState"),
         "newton": ("NewtonResult", "NewtonSolver", "NonlinearProblem", "Policy"),
-        "symmetry": ("Isometry", "SymmetryBasis", "mirror_node_map", "symmetry_basis"),
+        "symmetry": ("Isometry", "Subspace", "SymmetryBasis", "mirror_node_map", "symmetry_basis"),
     },
 )
 __all__ += ["NewtonSettings"]

@@ -108,6 +108,9 @@ class Subspace:
         self._PtP_inv = 1.0 / np.asarray(self._M.power(2).sum(axis=0)).ravel()
         self._Ar: Any = None
         self._Ar_nz = -1.0
+        # The restricted right-hand side and solution, reused by every solve.
+        self._br = self.P.createVecRight()
+        self._xr = self._br.duplicate()
 
     def operator(self, A: Any) -> tuple[Any, bool]:
         """P^T A P and whether it is a new matrix: the product's structure is reused while
@@ -122,11 +125,9 @@ class Subspace:
 
     def solve(self, ksp: Any, b: Any, x: Any) -> None:
         """x = P y with (P^T A P) y = P^T b, ``ksp`` holding the reduced operator."""
-        br = self.P.createVecRight()
-        xr = br.duplicate()
-        self.P.multTranspose(b, br)
-        ksp.solve(br, xr)
-        self.P.mult(xr, x)
+        self.P.multTranspose(b, self._br)
+        ksp.solve(self._br, self._xr)
+        self.P.mult(self._xr, x)
 
     def antisymmetric_norm(self, v: np.ndarray) -> float:
         """||v - P (P^T P)^-1 P^T v||: the part of ``v`` outside the span."""

@@ -239,3 +239,37 @@ def test_split_wound_flanks_by_centroid_x() -> None:
     # With the mirror plane elsewhere everything is on one side.
     left2, right2 = split_wound_flanks(X, cells, wound, x_c=0.5)
     assert len(left2) == 16 and len(right2) == 0
+
+
+def test_a_held_support_weights_a_point_past_the_edge_without_pushing_it_along() -> None:
+    """The right square slid past the left one's edge (y + 0.93) and pressed into it: its
+    points near the edge sit in the support's fade. With the fade following the state, their
+    force has a component along the flat master (the energy falls as they slide off it);
+    with the support held (`freeze_support`) it is normal to it, and the force is still the
+    gradient of that energy and the tangent its derivative. `support_change` measures how
+    far the held support is from the state's."""
+    X, left, right, rnodes = two_squares(4, 4)
+    X[rnodes, 1] += 0.93
+    c = make_contact(X, left, right)
+    U = np.zeros_like(X)
+    U[rnodes, 0] = -0.02
+    u = U.ravel().copy()
+    f_live = c.force_vector(u).reshape(-1, 3)
+    assert np.abs(f_live[:, 1]).max() > 1e-3 * np.abs(f_live[:, 0]).max()
+    c.freeze_support(u)
+    assert c.support_change(u) == 0.0
+    f, K = c.force_vector(u), c.tangent_csr(u).toarray()
+    assert np.abs(f.reshape(-1, 3)[:, 1]).max() <= 1e-10 * np.abs(f).max()
+    eps = 1e-7
+    fd, Kfd = np.zeros_like(f), np.zeros_like(K)
+    for j in range(len(u)):
+        e = np.zeros_like(u)
+        e[j] = eps
+        fd[j] = (c.energy(u + e) - c.energy(u - e)) / (2 * eps)
+        Kfd[:, j] = (c.force_vector(u + e) - c.force_vector(u - e)) / (2 * eps)
+    np.testing.assert_allclose(f, fd, atol=1e-9 * np.abs(f).max())
+    np.testing.assert_allclose(K, Kfd, atol=1e-8 * np.abs(K).max())
+    U[rnodes, 1] += 0.02  # further off the edge: the fading points' support falls
+    assert c.support_change(U.ravel()) > 0.05
+    c.freeze_support(None)
+    np.testing.assert_array_equal(c.force_vector(u), f_live.ravel())

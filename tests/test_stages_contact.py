@@ -306,3 +306,38 @@ def test_stage_4_starts_from_a_stable_state_on_an_overlapping_wedge() -> None:
     print(f"\nlowest eigenvalue at the stage-4 start: {eig_start:.4g} mN/mm at "
           f"{CONTACT_START_kPa} kPa, {eig_1GPa:.4g} at 1 GPa")  # fmt: skip
     assert eig_start > 0.0 and eig_1GPa > 0.0
+
+
+@pytest.mark.fem
+def test_a_wedge_whose_points_slide_off_the_other_flank_goes_through_stage_4() -> None:
+    """Paper job 6708 (stiff skin, a 0-degree wedge, t_d = 0.5, width 1, depth 0.5, m = 0.7,
+    P2): contact points at the wedge's lower edge slide past the other flank's edge into the
+    support's fade. With the fade following the state the energy is concave there and Newton
+    cycled until its budget ran out; with the support held per solve stage 4 converges in a
+    few dozen steps, and the state it reaches is solved with the support it has."""
+    from woundsweep.config.geometry import GeometrySpec
+    from woundsweep.config.solver import SolverSettings
+    from woundsweep.mesh.build import build_mesh
+    from woundsweep.physics.materials import JobMaterials
+    from woundsweep.physics.stages import SUPPORT_TOL, WoundModel
+    from woundsweep.solver.newton import Policy
+
+    spec = dataclasses.replace(GeometrySpec.wedge(0.5, 0.5, 2.0, 1.0, 0.5, 0.7), element_degree=2)
+    m = WoundModel(build_mesh(spec), SolverSettings(element_degree=2))
+    m.set_materials(JobMaterials.table2("stiff", 0.0))
+    for stage in range(1, 7):
+        out = m.run_stage(stage)
+        assert out.solve.status == CONVERGED, stage
+        if stage >= 4:
+            assert m.contact.support_change(m.u) <= SUPPORT_TOL
+    assert m.results[4].solve.iterations <= 40
+    # A state solved with another support than its own is solved again until it is not.
+    c = m.contact
+    engaged = c.gaps(m.u) <= 0.0
+    c._frozen[engaged] *= 0.5
+    assert c.support_change(m.u) >= 0.5
+    rows = m.domain.gauge_rows()
+    _, _, load, scale = m._contact_load(6, rows)
+    res = m._support_rounds(m.results[6].solve, rows, load, scale, Policy.contact(m.settings))
+    assert res.status == CONVERGED and c.support_change(m.u) <= SUPPORT_TOL
+    assert res.iterations > m.results[6].solve.iterations

@@ -46,6 +46,7 @@ class ContactMultipliers:
         """Start of a stage: no multipliers from an earlier solve."""
         self._committed = None
         self.contact.mult = None
+        self.contact.freeze_support(None)
 
     def begin(self) -> None:
         """Start of a solve: the last converged solve's multipliers (the contact forces,
@@ -54,6 +55,7 @@ class ContactMultipliers:
         c.mult = None
         if not self._on():
             return
+        c.freeze_support(self.solution())
         c.mult = (
             self._committed.copy()
             if self._committed is not None

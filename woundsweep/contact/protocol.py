@@ -77,6 +77,15 @@ class ContactModel(Protocol):
         """(c psi(u0), c dpsi . du) of every contact point (0 where not engaged at u0)."""
         ...
 
+    def freeze_support(self, u: np.ndarray | None) -> None:
+        """Hold the contact points' weights at their values at ``u`` (None: let them follow
+        the state)."""
+        ...
+
+    def support_change(self, u: np.ndarray) -> float:
+        """How far the held weights of the engaged points are from their values at ``u``."""
+        ...
+
     def summary(self, u: np.ndarray) -> ContactSummary:
         """Penetration and contact force at ``u``."""
         ...

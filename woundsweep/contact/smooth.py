@@ -97,6 +97,7 @@ class _State(NamedTuple):
     grad: np.ndarray  # (na, L) dpsi in local dofs (0 in padding)
     hess: np.ndarray | None  # (na, L, L) d2psi
     index: np.ndarray  # (na,) engaged points' indices in the all-points numbering
+    support_all: np.ndarray  # (nq_total,) the support step s of every point
 
 
 class FlankContact:
@@ -150,6 +151,9 @@ class FlankContact:
         self._mult: np.ndarray | None = None
         self._cache_x: np.ndarray | None = None
         self._cache: dict[bool, _State] = {}
+        # The support step of every point frozen at a state (`freeze_support`), or None: s
+        # follows the state.
+        self._frozen: np.ndarray | None = None
         # Coupling pattern: per pass the sorted keys q * n_facets + f of the planned pairs.
         self.pattern_gap = float(pattern_gap)
         self.pattern_margin = float(pattern_margin)
@@ -211,6 +215,9 @@ class FlankContact:
         t_sup = np.zeros(nq)
         t_sup[seen] = D[seen] / ps.support_mm2[seen]
         s_w, s_1, s_2 = support_step(t_sup)
+        if self._frozen is not None:  # the support of the solve's start: a constant weight
+            s_w = self._frozen[off : off + nq]
+            s_1 = s_2 = np.zeros(nq)
         engaged = gap <= 0.0
         if self._mult is not None:  # semi-smooth active set: compressive multipliers stay
             engaged |= self._mult[off : off + nq] < 0.0
@@ -282,7 +289,7 @@ class FlankContact:
             )
         dofs = (3 * node_of[:, :, None] + np.arange(3)).reshape(na, 3 * L)
         weight = TWO_PASS_WEIGHT * ps.area_mm2 / ps.size_mm
-        return gap, weight * s_w**2, psi, weight[act_pt], dofs, grad, hess, act_pt
+        return gap, weight * s_w**2, psi, weight[act_pt], dofs, grad, hess, act_pt, s_w
 
     def _state(self, u: np.ndarray, hessian: bool) -> _State:
         """Gaps and derivatives at ``u`` (cached by the flank node positions; a state with the
@@ -317,6 +324,7 @@ class FlankContact:
             np.concatenate([pad(p[5], False) for p in parts]),
             np.concatenate([pad(p[6], True) for p in parts]) if hessian else None,
             np.concatenate([p[7] + off for p, off in zip(parts, self._offsets)]),
+            np.concatenate([p[8] for p in parts]),
         )
         self._cache[hessian] = st
         self.evaluations += 1
@@ -431,6 +439,36 @@ class FlankContact:
         self._mult = value
         self._cache_x = None
         self._cache.clear()
+
+    def freeze_support(self, u: np.ndarray | None) -> None:
+        """Hold every point's support step at its value at ``u`` (None: let it follow the
+        state). With s held, a point's energy is c s^2 <g>^2 / 2: the fade at the master's
+        edge then weights the point but does not push it along the surface."""
+        self._frozen = None
+        self._cache_x = None
+        self._cache.clear()
+        if u is not None:
+            self._frozen = self._state(u, hessian=False).support_all.copy()
+            self._cache_x = None
+            self._cache.clear()
+
+    def support_change(self, u: np.ndarray) -> float:
+        """Largest change of an engaged point's support step between the frozen one and that
+        at ``u`` (0 if none is frozen)."""
+        if self._frozen is None:
+            return 0.0
+        frozen = self._frozen
+        engaged = self._state(u, hessian=False).gap_all <= 0.0
+        self._frozen = None
+        self._cache_x = None
+        self._cache.clear()
+        try:
+            live = self._state(u, hessian=False).support_all
+        finally:
+            self._frozen = frozen
+            self._cache_x = None
+            self._cache.clear()
+        return float(np.max(np.abs(live - frozen)[engaged], initial=0.0))
 
     def penalty_multipliers(self, u: np.ndarray) -> np.ndarray:
         """mu = c psi(u) of every point (0 where not engaged): the penalty's own forces."""

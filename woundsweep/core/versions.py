@@ -17,8 +17,8 @@ __all__ = [
 # The result file's columns, footer and fingerprint layout (`woundsweep.store.identity`).
 RESULT_FORMAT_VERSION = 4
 # What the six stages solve (docs/model.md, "The six stages": their loads, the closure load of
-# stages 3-6, contact and tie). Part of a result's fingerprint.
-STAGES_VERSION = 3
+# stages 3-6, contact and its support held per solve, tie). Part of a result's fingerprint.
+STAGES_VERSION = 4
 # The geometry and the mesh size law (`woundsweep.mesh.sizing`, the closure zone imprinted on
 # the wound surface, edges scaled with the element degree). Cached meshes and results of
 # another version are rebuilt.

@@ -44,6 +44,9 @@ CONTACT_START_kPa = 1.0  # stage 4's penalty ramp starts here: far below the tis
 # Stage 4's penalty grows by at most this many decades per load increment: larger jumps
 # (increments double after easy ones) push the flanks apart faster than Newton can follow.
 CONTACT_MAX_DECADES = 1.5
+# A contact stage's state is accepted when no engaged point's support step differs from the
+# one it was solved with by more than SUPPORT_TOL; at most SUPPORT_ROUNDS re-solves get it there.
+SUPPORT_TOL, SUPPORT_ROUNDS = 1e-3, 3
 
 
 class StageOutcome(NamedTuple):
@@ -336,6 +339,7 @@ class WoundModel:
         largest = min(1.0, CONTACT_MAX_DECADES / decades) if stage == 4 else 1.0
         try:
             res = continuation(self.newton, rows, load, scale, first, policy, largest)
+            res = self._support_rounds(res, rows, load, scale, policy)
         finally:
             c.k_V_kPa = k_to
         diag: dict[str, float] = {}
@@ -350,6 +354,34 @@ class WoundModel:
         finally:
             c.k_V_kPa = k_to
         return res, diag
+
+    def _support_rounds(
+        self,
+        res: ContinuationResult,
+        rows: np.ndarray,
+        load: Callable[[float], LoadState],
+        scale: float,
+        policy: Policy,
+    ) -> ContinuationResult:
+        """Newton holds each point's support step at the solve's start (`FlankContact.
+        freeze_support`); a converged state is a result only if the support it reached is the
+        one it was solved with, so it is solved again at the stage's end load, support taken
+        from it, until it is (at most ``SUPPORT_ROUNDS`` times; else max-iterations)."""
+        c = self.contact
+        assert c is not None
+        rounds = 0
+        while res.status == StageStatus.CONVERGED and c.support_change(self.u) > SUPPORT_TOL:
+            if rounds == SUPPORT_ROUNDS:
+                return res._replace(status=StageStatus.MAX_ITERATIONS)
+            again = continuation(self.newton, rows, lambda s: load(1.0), scale, 1.0, policy)
+            times = [a + b for a, b in zip(res[-4:], again[-4:])]
+            res = again._replace(
+                iterations=res.iterations + again.iterations,
+                increments=res.increments + again.increments,
+                cuts=res.cuts + again.cuts,
+            )._replace(**dict(zip(ContinuationResult._fields[-4:], times)))
+            rounds += 1
+        return res
 
     def _contact_diagnostics(
         self, rows: np.ndarray, u: np.ndarray, c: ContactModel

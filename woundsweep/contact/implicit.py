@@ -23,7 +23,15 @@ from typing import NamedTuple
 
 import numpy as np
 
-__all__ = ["V_TO_Q", "PairTerms", "kernel", "pair_terms"]
+__all__ = [
+    "SUPPORT_T0",
+    "SUPPORT_T1",
+    "V_TO_Q",
+    "PairTerms",
+    "kernel",
+    "pair_terms",
+    "support_step",
+]
 
 _EPS = np.zeros((3, 3, 3))
 _EPS[0, 1, 2] = _EPS[1, 2, 0] = _EPS[2, 0, 1] = 1.0
@@ -120,3 +128,19 @@ def pair_terms(
         return V_TO_Q.T @ out @ V_TO_Q
 
     return PairTerms(W * tri, W * m, dN, dD, second(tri, dtri, d2tri), second(m, dm, d2m))
+
+
+# The support step: s(t) = 0 for t <= T0, 1 for t >= T1, C2 (quintic smoothstep) between.
+# t = D / D_full, D_full = pi rho^2 / 4 the kernel's integral over a plane: 1/4 at a corner
+# of a flat surface, 1/2 on an edge, so only points past the master's boundary fade.
+SUPPORT_T0, SUPPORT_T1 = 0.005, 0.05
+
+
+def support_step(t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """s(t) and its first two derivatives (see ``SUPPORT_T0``, ``SUPPORT_T1``)."""
+    w = SUPPORT_T1 - SUPPORT_T0
+    x = np.clip((t - SUPPORT_T0) / w, 0.0, 1.0)
+    s = x**3 * (10.0 - 15.0 * x + 6.0 * x**2)
+    s1 = 30.0 * x**2 * (1.0 - x) ** 2 / w
+    s2 = 60.0 * x * (1.0 - x) * (1.0 - 2.0 * x) / w**2
+    return s, s1, s2

@@ -41,7 +41,7 @@ from typing import Any, NamedTuple
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .implicit import pair_terms
+from .implicit import pair_terms, support_step
 from .protocol import ContactSummary
 from .surfaces import lumped_area, surface, triangle_areas
 
@@ -55,22 +55,6 @@ TWO_PASS_WEIGHT = 0.5  # each flank is slave once and master once
 # to the factorisation (the plan at the start of stage 4 has 4-6 % more entries than the
 # finite-element pattern with every tangent of stages 4-6, jobs 6367 and 7369).
 PATTERN_GAP, PATTERN_MARGIN = 0.1, 0.1
-
-
-# The support step: s(t) = 0 for t <= T0, 1 for t >= T1, C2 (quintic smoothstep) between.
-# t = D / D_full, D_full = pi rho^2 / 4 the kernel's integral over a plane: 1/4 at a corner
-# of a flat surface, 1/2 on an edge, so only points past the master's boundary fade.
-SUPPORT_T0, SUPPORT_T1 = 0.005, 0.05
-
-
-def support_step(t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """s(t) and its first two derivatives (see ``SUPPORT_T0``, ``SUPPORT_T1``)."""
-    w = SUPPORT_T1 - SUPPORT_T0
-    x = np.clip((t - SUPPORT_T0) / w, 0.0, 1.0)
-    s = x**3 * (10.0 - 15.0 * x + 6.0 * x**2)
-    s1 = 30.0 * x**2 * (1.0 - x) ** 2 / w
-    s2 = 60.0 * x * (1.0 - x) * (1.0 - 2.0 * x) / w**2
-    return s, s1, s2
 
 
 class _Pass(NamedTuple):
@@ -437,6 +421,10 @@ class FlankContact:
     @mult.setter
     def mult(self, value: np.ndarray | None) -> None:
         self._mult = value
+        self._forget()
+
+    def _forget(self) -> None:
+        """Drop the cached evaluations (made with other multipliers or support)."""
         self._cache_x = None
         self._cache.clear()
 
@@ -445,30 +433,23 @@ class FlankContact:
         state). With s held, a point's energy is c s^2 <g>^2 / 2: the fade at the master's
         edge then weights the point but does not push it along the surface."""
         self._frozen = None
-        self._cache_x = None
-        self._cache.clear()
+        self._forget()
         if u is not None:
             self._frozen = self._state(u, hessian=False).support_all.copy()
-            self._cache_x = None
-            self._cache.clear()
+            self._forget()
 
     def support_change(self, u: np.ndarray) -> float:
-        """Largest change of an engaged point's support step between the frozen one and that
-        at ``u`` (0 if none is frozen)."""
-        if self._frozen is None:
+        """Largest change of an engaged point's support step between the held one and that
+        at ``u`` (0 if none is held)."""
+        held = self._frozen
+        if held is None:
             return 0.0
-        frozen = self._frozen
         engaged = self._state(u, hessian=False).gap_all <= 0.0
-        self._frozen = None
-        self._cache_x = None
-        self._cache.clear()
-        try:
-            live = self._state(u, hessian=False).support_all
-        finally:
-            self._frozen = frozen
-            self._cache_x = None
-            self._cache.clear()
-        return float(np.max(np.abs(live - frozen)[engaged], initial=0.0))
+        self.freeze_support(None)
+        live = self._state(u, hessian=False).support_all
+        self._frozen = held
+        self._forget()
+        return float(np.max(np.abs(live - held)[engaged], initial=0.0))
 
     def penalty_multipliers(self, u: np.ndarray) -> np.ndarray:
         """mu = c psi(u) of every point (0 where not engaged): the penalty's own forces."""

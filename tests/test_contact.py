@@ -85,18 +85,23 @@ def test_concentric_cylinders_gap_converges_like_h_squared() -> None:
 # -- FlankContact -----------------------------------------------------------------------------
 
 
-def test_force_is_the_gradient_of_the_energy_and_tangent_its_derivative(squares) -> None:
-    X, left, right, rnodes = squares
-    c = make_contact(X, left, right)
-    u = penetrating_state(np.random.default_rng(1), X, rnodes, 0.05, 0.01)
-    f, K = c.force_vector(u), c.tangent_csr(u).toarray()
-    eps = 1e-7
-    fd, Kfd = np.zeros_like(f), np.zeros_like(K)
+def _central_differences(c: FlankContact, u: np.ndarray, eps: float = 1e-7):
+    """The energy's gradient and the force's Jacobian at ``u`` by central differences."""
+    fd, Kfd = np.zeros(len(u)), np.zeros((len(u), len(u)))
     for j in range(len(u)):
         e = np.zeros_like(u)
         e[j] = eps
         fd[j] = (c.energy(u + e) - c.energy(u - e)) / (2 * eps)
         Kfd[:, j] = (c.force_vector(u + e) - c.force_vector(u - e)) / (2 * eps)
+    return fd, Kfd
+
+
+def test_force_is_the_gradient_of_the_energy_and_tangent_its_derivative(squares) -> None:
+    X, left, right, rnodes = squares
+    c = make_contact(X, left, right)
+    u = penetrating_state(np.random.default_rng(1), X, rnodes, 0.05, 0.01)
+    f, K = c.force_vector(u), c.tangent_csr(u).toarray()
+    fd, Kfd = _central_differences(c, u)
     assert np.abs(f).max() > 1e3 and np.abs(K).max() > 1e4  # a real contact state
     np.testing.assert_allclose(f, fd, atol=1e-9 * np.abs(f).max())
     np.testing.assert_allclose(K, Kfd, atol=1e-8 * np.abs(K).max())
@@ -260,13 +265,7 @@ def test_a_held_support_weights_a_point_past_the_edge_without_pushing_it_along()
     assert c.support_change(u) == 0.0
     f, K = c.force_vector(u), c.tangent_csr(u).toarray()
     assert np.abs(f.reshape(-1, 3)[:, 1]).max() <= 1e-10 * np.abs(f).max()
-    eps = 1e-7
-    fd, Kfd = np.zeros_like(f), np.zeros_like(K)
-    for j in range(len(u)):
-        e = np.zeros_like(u)
-        e[j] = eps
-        fd[j] = (c.energy(u + e) - c.energy(u - e)) / (2 * eps)
-        Kfd[:, j] = (c.force_vector(u + e) - c.force_vector(u - e)) / (2 * eps)
+    fd, Kfd = _central_differences(c, u)
     np.testing.assert_allclose(f, fd, atol=1e-9 * np.abs(f).max())
     np.testing.assert_allclose(K, Kfd, atol=1e-8 * np.abs(K).max())
     U[rnodes, 1] += 0.02  # further off the edge: the fading points' support falls

@@ -81,7 +81,7 @@ class _State(NamedTuple):
     grad: np.ndarray  # (na, L) dpsi in local dofs (0 in padding)
     hess: np.ndarray | None  # (na, L, L) d2psi
     index: np.ndarray  # (na,) engaged points' indices in the all-points numbering
-    support_all: np.ndarray  # (nq_total,) the support step s of every point
+    support_all: np.ndarray  # (nq_total,) every point's support step at this state (not held)
 
 
 class FlankContact:
@@ -199,6 +199,7 @@ class FlankContact:
         t_sup = np.zeros(nq)
         t_sup[seen] = D[seen] / ps.support_mm2[seen]
         s_w, s_1, s_2 = support_step(t_sup)
+        s_live = s_w
         if self._frozen is not None:  # the support of the solve's start: a constant weight
             s_w = self._frozen[off : off + nq]
             s_1 = s_2 = np.zeros(nq)
@@ -273,7 +274,7 @@ class FlankContact:
             )
         dofs = (3 * node_of[:, :, None] + np.arange(3)).reshape(na, 3 * L)
         weight = TWO_PASS_WEIGHT * ps.area_mm2 / ps.size_mm
-        return gap, weight * s_w**2, psi, weight[act_pt], dofs, grad, hess, act_pt, s_w
+        return gap, weight * s_w**2, psi, weight[act_pt], dofs, grad, hess, act_pt, s_live
 
     def _state(self, u: np.ndarray, hessian: bool) -> _State:
         """Gaps and derivatives at ``u`` (cached by the flank node positions; a state with the
@@ -432,24 +433,18 @@ class FlankContact:
         """Hold every point's support step at its value at ``u`` (None: let it follow the
         state). With s held, a point's energy is c s^2 <g>^2 / 2: the fade at the master's
         edge then weights the point but does not push it along the surface."""
-        self._frozen = None
+        held = None if u is None else self._state(u, hessian=False).support_all.copy()
+        self._frozen = held
         self._forget()
-        if u is not None:
-            self._frozen = self._state(u, hessian=False).support_all.copy()
-            self._forget()
 
     def support_change(self, u: np.ndarray) -> float:
         """Largest change of an engaged point's support step between the held one and that
         at ``u`` (0 if none is held)."""
-        held = self._frozen
-        if held is None:
+        if self._frozen is None:
             return 0.0
-        engaged = self._state(u, hessian=False).gap_all <= 0.0
-        self.freeze_support(None)
-        live = self._state(u, hessian=False).support_all
-        self._frozen = held
-        self._forget()
-        return float(np.max(np.abs(live - held)[engaged], initial=0.0))
+        st = self._state(u, hessian=False)
+        change = np.abs(st.support_all - self._frozen)[st.gap_all <= 0.0]
+        return float(np.max(change, initial=0.0))
 
     def penalty_multipliers(self, u: np.ndarray) -> np.ndarray:
         """mu = c psi(u) of every point (0 where not engaged): the penalty's own forces."""

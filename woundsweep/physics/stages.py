@@ -47,6 +47,9 @@ CONTACT_MAX_DECADES = 1.5
 # A contact stage's state is accepted when no engaged point's support step differs from the
 # one it was solved with by more than SUPPORT_TOL; at most SUPPORT_ROUNDS re-solves get it there.
 SUPPORT_TOL, SUPPORT_ROUNDS = 1e-3, 3
+# The counts and times of a `ContinuationResult` that add up over consecutive solves.
+_SUMMED = ("iterations", "increments", "cuts", "assembly_time_s", "factor_time_s",
+           "solve_time_s", "residual_time_s")  # fmt: skip
 
 
 class StageOutcome(NamedTuple):
@@ -374,12 +377,7 @@ class WoundModel:
             if rounds == SUPPORT_ROUNDS:
                 return res._replace(status=StageStatus.MAX_ITERATIONS)
             again = continuation(self.newton, rows, lambda s: load(1.0), scale, 1.0, policy)
-            times = [a + b for a, b in zip(res[-4:], again[-4:])]
-            res = again._replace(
-                iterations=res.iterations + again.iterations,
-                increments=res.increments + again.increments,
-                cuts=res.cuts + again.cuts,
-            )._replace(**dict(zip(ContinuationResult._fields[-4:], times)))
+            res = again._replace(**{f: getattr(res, f) + getattr(again, f) for f in _SUMMED})
             rounds += 1
         return res
 

@@ -6,7 +6,7 @@ Usage::
     python benchmarks/angle_study.py OUT_DIR [--angles 0,15,...,90] [-- CASE FLAGS]
 
 Runs `woundsweep case` (the 2 cm upper-back ellipse of the paper's question, P2 at mesh size
-factor 0.3, six sutures; no evened placement and no comparison) at each angle and skin type,
+factor 0.18, six sutures; no evened placement and no comparison) at each angle and skin type,
 each into ``OUT_DIR/<skin>-<angle>``, then writes ``OUT_DIR/angle_study.csv`` and
 ``OUT_DIR/angle_study.png`` and prints the table. With ``--aspects 2.5,3,4`` it also solves
 the same 2 cm ellipse of normal skin along the Langer line at those length-to-width ratios

@@ -11,7 +11,7 @@ from cli_run import ws
 SMALL = [
     "--length-mm", "9", "--width-mm", "3", "--dermis-mm", "1.5", "--subcutis-mm", "1.5",
     "--depth-mm", "2.4", "--sutures", "3", "--angle-deg", "25", "--element", "1",
-    "--mesh-factor", "0.3",
+    "--mesh-factor", "0.18",
 ]  # fmt: skip
 
 
@@ -37,7 +37,7 @@ def test_case_writes_its_report(tmp_path: Path) -> None:
     assert "## The same wound along the Langer line" in report
     # Three meshes, each finer than the last.
     levels = data["mesh_levels"]
-    assert [lv["mesh_size_factor"] for lv in levels] == pytest.approx([0.3, 0.45, 0.675])
+    assert [lv["mesh_size_factor"] for lv in levels] == pytest.approx([0.18, 0.405, 0.91125])
     assert levels[0]["dofs"] < levels[1]["dofs"] < levels[2]["dofs"]
     assert "## Mesh convergence" in report
     assert res.stdout.rstrip().endswith(f"wrote {out / 'report.md'}")

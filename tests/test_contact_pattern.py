@@ -190,7 +190,7 @@ def test_the_pattern_grows_when_a_state_leaves_it(stage4) -> None:
         c.k_V_kPa = 1.0 * GPA_TO_KPA
         m.problem.jacobian(A)  # plans at u4
         growths, version = c.pattern_growths, c.pattern_version
-        m.u.reshape(-1, 3)[c.surfaces[0].nodes, 1] += 0.5 * float(np.max(c.passes[0].size_mm))
+        m.u.reshape(-1, 3)[c.surfaces[0].nodes, 1] += 0.5 * float(np.min(c.passes[0].size_mm))
         before = A.getInfo()["mallocs"]
         m.problem.jacobian(A)
         assert c.pattern_growths == growths + 1 and c.pattern_version != version

@@ -45,7 +45,7 @@ def test_converge_writes_levels_orders_and_a_figure(run_dir: Path, capsys) -> No
     assert [lv["mesh_size_factor"] for lv in levels] == pytest.approx([0.2, 0.26, 0.338])
     cells = [lv["cells"] for lv in levels]
     assert cells[0] < cells[1] < cells[2]
-    assert study["size_ratios"] == pytest.approx([1.3 ** (2 / 3)] * 2)
+    assert study["size_ratios"] == pytest.approx([1.3 ** (1 / 3)] * 2)
     assert sorted(study["studies"]) == ["1", "2", "3"]
     assert study["fits"] == {} and study["fit_deviations"] == {}  # three levels: no fit
     assert "closure_traction_kPa" in study["studies"]["3"]
@@ -77,7 +77,7 @@ def test_converge_on_listed_factors_uses_their_unequal_ratios(run_dir: Path, cap
     study = json.loads((run_dir / "convergence" / "job_0.json").read_text())
     levels = study["levels"]
     assert [lv["mesh_size_factor"] for lv in levels] == factors
-    h = [(0.5 / m) ** (2 / 3) for m in factors]
+    h = [(0.5 / m) ** (1 / 3) for m in factors]
     assert study["size_ratios"] == pytest.approx([a / b for a, b in zip(h, h[1:])])
     values = [lv["stages"]["1"]["p99_von_mises_kPa"] for lv in levels]
     f3, f2, f1 = values[-3:]

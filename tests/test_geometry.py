@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import math
 import subprocess
@@ -15,8 +16,8 @@ import pytest
 from woundsweep.config.geometry import GeometrySpec
 from woundsweep.core.errors import GeometryError
 from woundsweep.core.schema import CELL_TAGS, FACET_TAGS, TAGS, WOUND_TAGS
-from woundsweep.mesh.build import MeshData, build_mesh
-from woundsweep.mesh.sizing import PAPER_CELL_CAP, mesh_size_mm
+from woundsweep.mesh.build import MeshData, build_mesh, zone_limits
+from woundsweep.mesh.sizing import PAPER_CELL_CAP, SIZE_LAW, mesh_size_mm, size_scale, wound_size
 
 # Coarse but varied: both shapes, wounds inside the dermis, touching the interface
 # (cylinder tangent to it, wedge apex on it) and cutting into the subcutis.
@@ -385,3 +386,49 @@ def test_from_row_reads_manifest_columns_and_names_the_job() -> None:
         row | {"wound_shape": "cylindrical", "wound_aspect_factor": 0.0, "wound_depth_mm": 0.5}
     )
     assert cyl.wound_radius_mm == pytest.approx(0.5)
+
+
+def _edge_lengths_near(mesh: MeshData, near) -> np.ndarray:
+    """Mean edge length (mm) of the cells whose centroid satisfies ``near(x, y, z)``."""
+    p = mesh.points[mesh.cells]
+    c = p.mean(axis=1)
+    pairs = [(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)]
+    edges = np.mean([np.linalg.norm(p[:, i] - p[:, j], axis=1) for i, j in pairs], axis=0)
+    sel = near(c[:, 0], c[:, 1], c[:, 2])
+    assert sel.sum() >= 5
+    return edges[sel]
+
+
+def test_the_law_refines_a_wedges_apex_and_the_zone_border_in_the_mesh() -> None:
+    """The built mesh is finer at a wedge's apex (a re-entrant edge) than on its flank away
+    from it, by the law's ratio there, and finer at the closure zone's border than in the
+    dermis away from the wound; a cylinder's floor line (its notch root) gets the same ratio."""
+    spec = GeometrySpec.wedge(1.0, 1.0, 4.0, 2.0, 0.8, 0.7)  # the apex 0.8 mm deep, w = 2 mm
+    mesh = build_mesh(spec)
+    w, d = spec.wound_width_mm, spec.wound_depth_mm
+    r = 0.15
+
+    def near(x0, z0):
+        return lambda x, y, z: np.hypot(x - x0, z - z0) < r
+
+    # the flank's midpoint, 0.45 mm from the apex, and a point just outside it in the dermis
+    xm, zm = w / 4, -d / 2
+    apex = _edge_lengths_near(mesh, near(w / 2, -d))
+    flank = _edge_lengths_near(mesh, near(xm - 0.15, zm))
+    assert np.median(apex) < 0.75 * np.median(flank)
+    # the closure zone's border on the flank against the dermis half a patch away
+    y_max, _ = zone_limits(spec)
+    border = _edge_lengths_near(
+        mesh, lambda x, y, z: (np.hypot(x - xm, z - zm) < 0.3) & (np.abs(y - y_max) < 0.3)
+    )
+    far = _edge_lengths_near(mesh, lambda x, y, z: (x < -spec.patch_half_length_mm / 2) & (z > -1))
+    assert np.median(border) < 0.5 * np.median(far)
+    # the law itself: h_w on the flank, the apex's fraction of it at the apex
+    h = functools.partial(mesh_size_mm, spec)
+    assert h(xm, 0.0, zm) / size_scale(0.7, 1) == pytest.approx(wound_size(spec), rel=1e-12)
+    assert h(w / 2, 0.0, -d) / h(xm, 0.0, zm) == pytest.approx(SIZE_LAW["floor_per_wound"])
+    cyl = GeometrySpec.cylindrical(1.0, 1.0, 4.0, 2.0, 0.1, 0.7)
+    bottom = -cyl.wound_depth_mm
+    assert mesh_size_mm(cyl, w / 2, 0.0, bottom) / size_scale(0.7, 1) == pytest.approx(
+        SIZE_LAW["floor_per_wound"] * wound_size(cyl), rel=1e-12
+    )

@@ -57,14 +57,15 @@ def test_contact_stages_close_the_wound_without_overlap(
     d4, d5, d6 = (o.diagnostics for o in outs[3:])
     x = m.domain.X + m.u.reshape(-1, 3)
     left, right = _flank_nodes(m)
-    h = float(np.min(m.contact.passes[0].size_mm))
+    h = float(np.median(m.contact.passes[0].size_mm))
     # Under the stage-2 closure the wedge's lower flanks pass through the mirror plane; after
-    # the contact stages no flank node crosses it by more than 1 % of the smallest element
-    # (independent of the contact module's gap).
+    # the contact stages no flank node crosses it by more than 1 % of the flank's median
+    # element (independent of the contact module's gap; the penalty's penetration scales with
+    # the local size, and the apex's elements are half the flank's).
     x2 = m.domain.X + m.displacements[2].reshape(-1, 3)
     crossed = np.max(x2[left, 0] - m.domain.x_c)
     print(f"\n{which}: left flank beyond the mirror plane before contact {crossed:.3g} mm, "
-          f"after stage 6 {np.max(x[left, 0] - m.domain.x_c):.3g} mm (h_min {h:.3g} mm)")  # fmt: skip
+          f"after stage 6 {np.max(x[left, 0] - m.domain.x_c):.3g} mm (h {h:.3g} mm)")  # fmt: skip
     assert np.max(x[left, 0] - m.domain.x_c) < 0.01 * h
     assert np.max(m.domain.x_c - x[right, 0]) < 0.01 * h
     # The sutured zone stays closed at the surface through the contact stages.
@@ -283,12 +284,12 @@ def test_contact_stages_5_and_6_start_in_equilibrium(deep_wedge_mesh) -> None:
         assert m.run_stage(stage).solve.status == CONVERGED
 
 
-def test_stage_4_starts_from_a_stable_state_on_an_overlapping_wedge() -> None:
+def test_stage_4_starts_and_ends_stable_on_an_overlapping_wedge() -> None:
     """Paper job 8652's geometry (a 0-degree wedge, width 3, depth 1.5): its Dirichlet-closed
     lower flanks overlap. The sutured zone's nodes are tied, not contact points, so the
-    contact's curvature term (force times the gap's second derivative) acts only below the
-    zone: the stage-4 starting state is a minimum of the potential at the starting penalty and
-    at 1 GPa alike."""
+    contact's curvature term acts only below the zone: the stage-4 starting state is a minimum
+    of the potential at the starting penalty, and the state stage 4 reaches is one at 1 GPa
+    with the overlap pushed out."""
     from woundsweep.config.geometry import GeometrySpec
     from woundsweep.mesh.build import build_mesh
     from woundsweep.physics.materials import JobMaterials
@@ -301,11 +302,16 @@ def test_stage_4_starts_from_a_stable_state_on_an_overlapping_wedge() -> None:
     rows = m.domain.gauge_rows()
     m._contact_load(4, rows)  # the stage-4 start: the stage-2 state, dead closure load
     np.testing.assert_array_equal(m.u, m.displacements[2])
+    overlap_start = -float(m.contact.gaps(m.u).min())
     eig_start = m._stability(rows, CONTACT_START_kPa)["stability_min_eig_mN_per_mm"]
-    eig_1GPa = m._stability(rows, 1e6)["stability_min_eig_mN_per_mm"]
-    print(f"\nlowest eigenvalue at the stage-4 start: {eig_start:.4g} mN/mm at "
-          f"{CONTACT_START_kPa} kPa, {eig_1GPa:.4g} at 1 GPa")  # fmt: skip
-    assert eig_start > 0.0 and eig_1GPa > 0.0
+    assert eig_start > 0.0
+    assert m.run_stage(4).solve.status == CONVERGED
+    eig_end = m._stability(rows, 1e6)["stability_min_eig_mN_per_mm"]
+    overlap_end = -float(m.contact.gaps(m.u).min())
+    print(f"\nlowest eigenvalue: {eig_start:.4g} mN/mm at the start ({CONTACT_START_kPa} kPa), "
+          f"{eig_end:.4g} at the end (1 GPa); overlap {overlap_start:.3g} -> {overlap_end:.3g} mm")  # fmt: skip
+    assert eig_end > 0.0
+    assert overlap_start > 0.05 and overlap_end < 1e-3 * overlap_start
 
 
 @pytest.mark.fem

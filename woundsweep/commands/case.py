@@ -125,7 +125,7 @@ _ITCH = ItchLoad()
 @click.option(
     "--converge",
     is_flag=True,
-    help="Also solve the sutures on two finer meshes (mesh factor x1.5, x2.25).",
+    help="Also solve the sutures on two finer meshes (mesh factor x2.25, x5.06).",
 )
 def cmd(out: Path, length_mm: float, width_mm: float | None, angle_deg: float, site: str,
         dermis_mm: float | None, subcutis_mm: float | None, depth_mm: float | None, skin: str,

@@ -22,7 +22,7 @@ STAGES_VERSION = 4
 # The geometry and the mesh size law (`woundsweep.mesh.sizing`, the closure zone imprinted on
 # the wound surface, edges scaled with the element degree). Cached meshes and results of
 # another version are rebuilt.
-MESH_LAW_VERSION = 3
+MESH_LAW_VERSION = 5
 # How the stored stress statistics are computed (docs/model.md, "Stress statistics": P2
 # cells sampled at a degree-4 rule's points). Part of a result's fingerprint.
 STATISTICS_VERSION = 2

@@ -1,12 +1,19 @@
 """The mesh size law (version ``MESH_LAW_VERSION``): target edge length at a point (pure Python).
 
 With D the distance (mm) from the wound surface (for the fusiform excision `Lens.distance`:
-in plan to its outline, combined with the height below its floor), zeta = max(0, -z - t_d) / t_d the depth
-below the layer interface in dermal thicknesses, m the mesh size factor,
-s = (0.5 / m)^(2/3) and p the element degree::
+in plan to its outline, combined with the height below its floor), D_f the distance from a
+trench's floor line (a wedge's apex, a cylinder's deepest line; x = w / 2, z = -d), zeta =
+max(0, -z - t_d) / t_d the depth below the layer interface in dermal thicknesses, m the mesh
+size factor, s = (0.5 / m)^(1/3) and p the element degree::
 
-    h = p * s * min(h_w + 0.5 D,  (0.7 t_d + 0.1 D) (1 + 0.75 zeta),  L / 4),
+    h = p * s * min(h_w + 0.5 D,  (0.7 t_d + 0.1 D) (1 + 0.75 zeta),  L / 4,  h_w / 2 + D_f),
     h_w = min(t_d / 3, w / 6)
+
+The floor line is where the open wound's stress concentrates (a wedge's apex is a re-entrant
+edge, a cylinder's floor the notch root), so it gets half the wound's spacing; the excision
+has no such term. The exponent 1/3 keeps the paper's coarsest factor (0.3) at 1.19 times the
+reference spacing. Both were chosen by p99's mesh convergence on twelve paper geometries at
+P2 (docs/validation.md, "Mesh convergence").
 
 The law sets the spacing of the displacement's nodes: a P2 element's edge holds a node at
 its midpoint, so P2 edges are twice as long as P1's for the same spacing, and a mesh size
@@ -19,12 +26,12 @@ All lengths scale with the geometry, so the cell count depends (up to OCC's abso
 tolerances) only on the dimensionless factors; every term scales with s, so a larger factor
 gives a uniformly finer field. Fine at the wound (h_w resolves both the dermis and the wound
 width), graded away from it, finer in the dermis than in the subcutis, coarser with depth,
-and never coarser than s L / 4 (eight cells along the wound length at m = 0.5). On the 1,296
-paper geometries with the default closure zone (benchmarks/bench_geometry.py --all): min /
-median / max cells 2.7k / 4.5k / 8.7k at m = 0.3, 4.6k / 7.6k / 15.4k at m = 0.5,
-7.2k / 11.6k / 24.8k at m = 0.7; the count rises strictly with m for every geometry. Minimum
-SICN is 0.050 over the grid; the few meshes below 0.1 are cylinders whose bottom is tangent to (or within 2% of) the
-layer interface, where the dermis between wound and subcutis thins to a cusp.
+and never coarser than s L / 4 (eight cells along the wound length at m = 0.5). On 60 of
+the 432 paper geometries drawn at random (`random.seed(20261204)`; P1, default closure zone):
+min / median / max cells 4.3k / 6.7k / 11.9k at m = 0.3, 5.3k / 8.8k / 16.2k at m = 0.5,
+6.7k / 10.9k / 20.3k at m = 0.7; the count rises strictly with m for each of them, and the
+minimum SICN is 0.10. The worst shapes are where a cylinder's bottom is tangent to (or
+within 2% of) the layer interface: the dermis between wound and subcutis thins to a cusp.
 """
 
 from __future__ import annotations
@@ -64,7 +71,7 @@ _GRID = 8
 SIZE_LAW: Mapping[str, float] = MappingProxyType(
     {
         "reference_factor": 0.5,  # m at which s = 1
-        "factor_exponent": 2.0 / 3.0,  # s = (0.5 / m) ** exponent
+        "factor_exponent": 1.0 / 3.0,  # s = (0.5 / m) ** exponent
         "wound_per_dermis": 1.0 / 3.0,  # h_w <= t_d / 3
         "wound_per_width": 1.0 / 6.0,  # h_w <= w / 6
         "wound_growth": 0.5,  # dh/dD near the wound
@@ -72,6 +79,8 @@ SIZE_LAW: Mapping[str, float] = MappingProxyType(
         "layer_growth": 0.1,  # slow lateral coarsening far from the wound
         "depth_growth": 0.75,  # relative growth per t_d below the interface
         "patch_fraction": 0.25,  # h <= L / 4
+        "floor_per_wound": 0.5,  # at the floor line (x = w / 2, z = -d), in h_w
+        "floor_growth": 1.0,  # dh/dD_f away from it
     }
 )
 
@@ -103,7 +112,13 @@ def mesh_size_mm(spec: GeometrySpec, x: float, y: float, z: float) -> float:
         1.0 + SIZE_LAW["depth_growth"] * zeta
     )
     cap = SIZE_LAW["patch_fraction"] * spec.patch_half_length_mm
-    return size_scale(spec.mesh_size_factor, spec.element_degree) * min(near, layer, cap)
+    h = min(near, layer, cap)
+    if spec.shape != "fusiform":
+        floor = math.hypot(x - spec.wound_width_mm / 2, z + spec.wound_depth_mm)
+        h = min(
+            h, SIZE_LAW["floor_per_wound"] * wound_size(spec) + SIZE_LAW["floor_growth"] * floor
+        )
+    return size_scale(spec.mesh_size_factor, spec.element_degree) * h
 
 
 def estimate_cells(spec: GeometrySpec) -> float:

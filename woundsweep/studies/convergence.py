@@ -5,9 +5,9 @@ list (e.g. the paper's 0.3, 0.5, 0.7 and finer ones, up to `FINEST_FACTOR`), eac
 the job's geometry (closure zone included); or one such mesh and its uniform refinements
 (`woundsweep.mesh.refine`: nested, element sizes halved per level, eight times the cells).
 Every other mesh input is the job's. The size law scales every element size with
-s = (0.5 / m)^(2/3) (`woundsweep.mesh.sizing`): s is each level's relative element size
+s = (0.5 / m)^(1/3) (`woundsweep.mesh.sizing`): s is each level's relative element size
 (halved per refinement), and the ratios of consecutive sizes are those the observed order
-and the GCI use (r^(2/3) for a constant factor ratio r). Each quantity's deviation at
+and the GCI use (r^(1/3) for a constant factor ratio r). Each quantity's deviation at
 a level is (f - f_ext) / f_ext, f_ext the finest triple's extrapolation. With four or more
 levels each quantity is also fitted over all of them by least squares (`gci.fit_study`: order,
 limit f0, scatter and each level's uncertainty U), with deviations (f - f0) / f0: meshes that

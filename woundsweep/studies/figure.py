@@ -39,7 +39,7 @@ def draw_study(study: dict[str, Any], path: Path) -> Path:
             fit = study.get("fits", {}).get(stage, {}).get(q)
             if fit and fit["kind"] in ("monotone", "scattered"):
                 ax.plot([0.0], [fit["extrapolated"]], "s", mfc="none", color=color)
-        ax.set_xlabel("relative element size s = (0.5 / m)^(2/3)")
+        ax.set_xlabel("relative element size s = (0.5 / m)^(1/3)")
         ax.set_ylabel(q)
         ax.set_xlim(left=0.0)
         ax.grid(alpha=0.3)

@@ -6,12 +6,13 @@ Usage::
                                              [--workers 2]
 
 RUN_DIR is a run generated from sweeps/paper.yaml (``woundsweep generate sweeps/paper.yaml
---out RUN_DIR``, whose solver uses P2). The default jobs are twelve paper geometries of
+--out RUN_DIR``, whose solver uses P2). The default jobs are fourteen paper geometries of
 normal skin with t_d = 1 mm and f_s = 1 (T = 2 mm): a cylinder (a = 0.1) and a wedge (f_d =
 0.5) of the smallest and of the largest patch (patch factors 1 and 3, f_w = 0.3; 1953, 1954,
 2358, 7785, 7786, 8191), a cylinder and a wedge of patch factor 2 and f_w = 0.5 (L = 4 mm,
 w = 2 mm; 2304, 2305, 8136, 8137), and the widest wedges (f_w = 0.8, w = 1.6 mm), deep
-(f_d = 0.7, into the subcutis; 7983) and shallow (f_d = 0.3; 7966); both orientations.
+(f_d = 0.7, into the subcutis; 7983, 7984) and shallow (f_d = 0.3; 7965, 7966), each at
+0 and 45 degrees.
 Each job is solved with ``woundsweep converge RUN_DIR --job N --factors ...`` (its JSON and
 figure land under RUN_DIR/convergence/), ``--workers`` jobs at once. The default levels are
 the paper's factors and three finer ones (element sizes 1.19 to 0.63 of the reference): the
@@ -25,7 +26,7 @@ scatter) and the form; then the stage-2 closure force the same way. It counts th
 2 and 4-6 within 5 % of f0 at the paper's factors, those also with a monotone fit that the
 scatter does not swamp, and those with a spread within 5 %. With three levels the finest
 triple's Richardson extrapolation replaces the fit. Not part of ``make bench``: with P2 it
-takes about five minutes on two cores.
+takes about ten minutes on two cores.
 """
 
 from __future__ import annotations
@@ -45,7 +46,7 @@ from woundsweep.studies.convergence import analyse_levels  # noqa: E402
 
 __all__ = ["main"]
 
-JOBS = (1953, 1954, 2304, 2305, 2358, 7785, 7786, 7966, 7983, 8136, 8137, 8191)
+JOBS = (1953, 1954, 2304, 2305, 2358, 7785, 7786, 7965, 7966, 7983, 7984, 8136, 8137, 8191)
 FACTORS = "0.3,0.5,0.7,1,1.4,2"
 PAPER_FACTORS = (0.3, 0.5, 0.7)
 TOLERANCE = 0.05

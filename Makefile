@@ -39,8 +39,8 @@ demo: setup
 bench: setup
 	@for b in benchmarks/bench_*.py; do echo "== $$b"; $(PY) $$b || exit 1; done
 
-# p99's mesh convergence on fourteen paper geometries at six mesh size factors, two jobs at
-# once (not part of bench: about ten minutes on two cores).
+# p99's mesh convergence on the paper geometries of benchmarks/convergence.py at six mesh
+# size factors, two jobs at once (not part of bench: about ten minutes on two cores).
 bench-convergence: setup
 	$(WS) generate sweeps/paper.yaml --out runs/paper
 	$(PY) benchmarks/convergence.py runs/paper --workers 2

@@ -12,8 +12,8 @@ size factor, s = (0.5 / m)^(1/3) and p the element degree::
 The floor line is where the open wound's stress concentrates (a wedge's apex is a re-entrant
 edge, a cylinder's floor the notch root), so it gets half the wound's spacing; the excision
 has no such term. The exponent 1/3 keeps the paper's coarsest factor (0.3) at 1.19 times the
-reference spacing. Both were chosen by p99's mesh convergence on fourteen paper geometries at
-P2 (docs/validation.md, "Mesh convergence").
+reference spacing. Both were chosen by p99's mesh convergence on the benchmark geometries of
+`benchmarks/convergence.py` at P2 (docs/validation.md, "Mesh convergence").
 
 The law sets the spacing of the displacement's nodes: a P2 element's edge holds a node at
 its midpoint, so P2 edges are twice as long as P1's for the same spacing, and a mesh size

@@ -1,18 +1,24 @@
 # woundsweep: `make demo` runs the pipeline on sweeps/demo.yaml; `make test` runs the tests.
-# Both call `make setup` first (idempotent: a second run does nothing slow).
+# Both call `make setup` first (idempotent: a second run does nothing slow); `make test` then
+# `make test-deps` (the system packages of the tests marked `system`; idempotent too).
 VENV    := .venv
 PY      := $(VENV)/bin/python
 WS      := $(VENV)/bin/woundsweep
 DEMO_DIR ?= runs/demo
 PYTEST_ARGS ?=
 
-.PHONY: setup test test-fast test-dolfinx-latest demo bench bench-convergence lint format clean
+.PHONY: setup test-deps test test-fast test-dolfinx-latest demo bench bench-convergence lint format clean
 
 setup:
 	@bash scripts/setup.sh
 
-test: setup
-	$(PY) -m pytest -q $(PYTEST_ARGS)
+# Debian's slurm-wlm, munge, chromium and chromium-driver, for the tests marked `system`
+# (without them pytest skips those tests, naming this target).
+test-deps:
+	@bash scripts/test-deps.sh
+
+test: setup test-deps
+	$(PY) -m pytest -q --durations=25 $(PYTEST_ARGS)
 
 # Tests that do not need DOLFINx (seconds).
 test-fast: setup
@@ -48,6 +54,7 @@ bench-convergence: setup
 lint: setup
 	$(VENV)/bin/ruff check woundsweep tests benchmarks
 	$(VENV)/bin/ruff format --check woundsweep tests benchmarks
+	$(VENV)/bin/mypy
 
 format: setup
 	$(VENV)/bin/ruff format woundsweep tests benchmarks

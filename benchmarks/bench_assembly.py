@@ -39,6 +39,7 @@ sys.path.insert(0, str(ROOT))
 from timing import median_ms  # noqa: E402
 
 from woundsweep.config.geometry import GeometrySpec  # noqa: E402
+from woundsweep.config.solver import SolverSettings  # noqa: E402
 from woundsweep.mesh.build import build_mesh  # noqa: E402
 
 __all__ = ["main"]
@@ -47,7 +48,8 @@ __all__ = ["main"]
 def _measure(mesh, flags: list[str] | None, cache: str) -> dict[str, object]:  # type: ignore[no-untyped-def]
     from woundsweep.physics import compat
     from woundsweep.physics.materials import JobMaterials
-    from woundsweep.physics.stages import WoundModel
+    from woundsweep.physics.model import WoundModel
+    from woundsweep.physics.stages import run_stage
 
     jit = compat.jit_options(cache_dir=cache)
     if flags is None:
@@ -55,10 +57,10 @@ def _measure(mesh, flags: list[str] | None, cache: str) -> dict[str, object]:  #
     else:
         jit["cffi_extra_compile_args"] = flags
     t0 = time.perf_counter()
-    model = WoundModel(mesh, jit=jit)
+    model = WoundModel(mesh, SolverSettings(element_degree=1), jit=jit)
     compile_s = time.perf_counter() - t0
     model.set_materials(JobMaterials.table2("normal", 45.0))
-    model.run_stage(1)
+    run_stage(model, 1)
     p = model.problem
     b = model.newton.rvec
     t_res = median_ms(lambda: p.residual(b), 15)
@@ -137,7 +139,9 @@ def main() -> int:
 
     logging.getLogger().setLevel(logging.WARNING)  # no compiler command lines
     T = 2.0  # bench_solver.py's "mid-size" job
-    mesh = build_mesh(GeometrySpec.wedge(1.0, 1.0, 2 * T, 0.3 * 2 * T, 0.5 * T, 0.5))
+    mesh = build_mesh(
+        GeometrySpec.wedge(1.0, 1.0, 2 * T, 0.3 * 2 * T, 0.5 * T, 0.5, element_degree=1)
+    )
     defaults = compat.jit_defaults().get("cffi_extra_compile_args")
     default_flags = list(defaults[0]) if defaults else None
     out = {}

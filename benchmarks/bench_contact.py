@@ -34,6 +34,7 @@ sys.path.insert(0, str(ROOT))
 from timing import median_ms  # noqa: E402
 
 from woundsweep.config.geometry import GeometrySpec  # noqa: E402
+from woundsweep.config.solver import SolverSettings  # noqa: E402
 from woundsweep.mesh.build import build_mesh  # noqa: E402
 
 __all__ = ["main"]
@@ -41,17 +42,20 @@ __all__ = ["main"]
 
 def main() -> int:
     from woundsweep.physics.materials import JobMaterials
-    from woundsweep.physics.stages import WoundModel
+    from woundsweep.physics.model import WoundModel
+    from woundsweep.physics.stages import run_stage
 
     # Same geometry as bench_solver.py's "mid-size" job.
     T = 2.0
-    mesh = build_mesh(GeometrySpec.wedge(1.0, 1.0, 2 * T, 0.3 * 2 * T, 0.5 * T, 0.5))
-    model = WoundModel(mesh)
+    mesh = build_mesh(
+        GeometrySpec.wedge(1.0, 1.0, 2 * T, 0.3 * 2 * T, 0.5 * T, 0.5, element_degree=1)
+    )
+    model = WoundModel(mesh, SolverSettings(element_degree=1))  # P1
     model.set_materials(JobMaterials.table2("soft", 90.0))
     A = model.problem.A
     for k in range(1, 5):
         mallocs = A.getInfo()["mallocs"]
-        out = model.run_stage(k)
+        out = run_stage(model, k)
         if out.solve.status != "converged":
             print(f"stage {k} did not converge ({out.solve.status}): no state to time")
             return 1

@@ -94,7 +94,8 @@ def main(argv: list[str] | None = None) -> int:
 
     from woundsweep.physics import compat
     from woundsweep.physics.materials import JobMaterials
-    from woundsweep.physics.stages import WoundModel
+    from woundsweep.physics.model import WoundModel
+    from woundsweep.physics.stages import run_stage
 
     compiled: list[str] = []
     real = ffcx_jit._compile_objects
@@ -148,7 +149,7 @@ def main(argv: list[str] | None = None) -> int:
         model.set_materials(materials)
         total = 0.0
         for k in range(1, last + 1):
-            out = model.run_stage(k)
+            out = run_stage(model, k)
             s = out.solve
             total += out.time_s
             d = out.diagnostics

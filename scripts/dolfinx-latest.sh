@@ -19,9 +19,9 @@
 # Environment: DOLFINX_LATEST_SUITE (Debian suite, default sid = DOLFINx 0.11; trixie = 0.9),
 #   WOUNDSWEEP_SID_ROOT (default /var/cache/woundsweep/SUITE-root),
 #   WOUNDSWEEP_SID_MIRROR (default http://deb.debian.org/debian), DOLFINX_LATEST_DEMO=0 skips the
-#   demo solve, DOLFINX_LATEST_MARKERS (pytest -m expression, default "fem"; tests/test_slurm.py and
-#   tests/test_slurm_cluster.py are
-#   always left out: they need SLURM on the host),
+#   demo solve, DOLFINX_LATEST_MARKERS (pytest -m expression, default "fem";
+#   tests/execution/test_slurm.py and tests/execution/test_slurm_cluster.py are always left
+#   out: they need SLURM on the host),
 #   DOLFINX_LATEST_TIMEOUT (seconds for the whole in-root run, default 1500),
 #   DOLFINX_LATEST_OUT (host directory for the demo job's results, default a new /tmp directory).
 # Exit status: the tests' status (0 pass, 1 failures, ...); 77 = cannot run here (not root,
@@ -203,8 +203,8 @@ rc=0
 # except the SLURM ones, which need slurmctld/slurmd on the host (the root has no cluster) and
 # test the scheduling around `woundsweep solve`, not DOLFINx; they run on the host's DOLFINx.
 markers=${DOLFINX_LATEST_MARKERS:-fem}
-echo "dolfinx-latest: pytest -m '$markers' --ignore=tests/test_slurm.py --ignore=tests/test_slurm_cluster.py $*"
-python3 -m pytest -m "$markers" --ignore=tests/test_slurm.py --ignore=tests/test_slurm_cluster.py -p no:cacheprovider -q -rfE "$@" \
+echo "dolfinx-latest: pytest -m '$markers' --ignore=tests/execution/test_slurm.py --ignore=tests/execution/test_slurm_cluster.py $*"
+python3 -m pytest -m "$markers" --ignore=tests/execution/test_slurm.py --ignore=tests/execution/test_slurm_cluster.py -p no:cacheprovider -q -rfE "$@" \
     || rc=$?
 [[ $rc -eq 5 ]] && { echo "dolfinx-latest: no fem tests collected"; rc=0; }
 echo "dolfinx-latest: fem tests: $(($(date +%s) - t0)) s, status $rc"

@@ -1,11 +1,15 @@
-"""Fixtures shared by several test modules.
+"""Fixtures shared by several layers' tests (a fixture one layer uses lives in its conftest.py).
+
+Layout: tests/<layer>/ holds the tests of woundsweep/<layer>/ (tests/commands: the CLI-level
+tests), tests/support/ the helper modules (importable as top-level modules through
+`pythonpath` in pyproject.toml: `from cli_run import ws`), tests/data/ reference files.
 
 Run directories: `demo_run` is sweeps/demo.yaml generated once through `woundsweep generate`
 (32 jobs; read-only: copy it before changing anything), `empty_run` a fresh directory holding
-its manifest and sweep copy only. Manifests: `paper` and `demo_manifest`, expanded from sweeps/paper.yaml and sweeps/demo.yaml. CLI runners: `cli` (the fork server of tests/cli_run.py)
-and `run_main` (`woundsweep.cli.main` in this process, output captured). Small meshes:
-`squares` (two facing, non-matching triangulated squares) and `cylinder_mesh` (the coarsest
-demo cylinder).
+its manifest and sweep copy only. Manifests: `paper` and `demo_manifest`, expanded from
+sweeps/paper.yaml and sweeps/demo.yaml. CLI runners: `cli` (the fork server of
+tests/support/cli_run.py) and `run_main` (`woundsweep.cli.main` in this process, output
+captured). Mesh: `deep_wedge_mesh` (demo job 18, P1).
 """
 
 from __future__ import annotations
@@ -75,27 +79,10 @@ def demo_manifest():
 
 
 @pytest.fixture(scope="module")
-def squares():
-    """Two facing unit squares with non-matching triangulations (3 x 3 against 4 x 4)."""
-    from contact_surfaces import two_squares
-
-    return two_squares(3, 4)
-
-
-@pytest.fixture(scope="module")
-def cylinder_mesh():
-    """Demo job 0: t_d = 1, subcutis factor 1, L = 4, width 1.2, aspect 0 (depth 0.6), m = 0.3."""
-    from woundsweep.config.geometry import GeometrySpec
-    from woundsweep.mesh.build import build_mesh
-
-    return build_mesh(GeometrySpec.cylindrical(1.0, 1.0, 4.0, 1.2, 0.0, 0.3))
-
-
-@pytest.fixture(scope="module")
 def deep_wedge_mesh():
     """Demo job 18: a deep, narrow wedge (width 1.2, depth 1.0, m = 0.3) whose lower flanks
-    overlap under the Dirichlet closure, so the contact stages engage."""
+    overlap under the Dirichlet closure, so the contact stages engage; the P1 mesh."""
     from woundsweep.config.geometry import GeometrySpec
     from woundsweep.mesh.build import build_mesh
 
-    return build_mesh(GeometrySpec.wedge(1.0, 1.0, 4.0, 1.2, 1.0, 0.3))
+    return build_mesh(GeometrySpec.wedge(1.0, 1.0, 4.0, 1.2, 1.0, 0.3, element_degree=1))

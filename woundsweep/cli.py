@@ -100,7 +100,13 @@ def missing_required(cmd: click.Command, ctx: click.Context, args: list[str]) ->
         if isinstance(param, click.Option):
             names.append(max(param.opts, key=len))
         else:
-            names.append(param.make_metavar(sub) if _METAVAR_TAKES_CTX else param.make_metavar())
+            # click's stubs declare one make_metavar signature (ctx from 8.2 on); the other
+            # branch serves the other click versions, so which call errs depends on the version.
+            names.append(
+                param.make_metavar(sub)  # type: ignore[call-arg, unused-ignore]
+                if _METAVAR_TAKES_CTX
+                else param.make_metavar()  # type: ignore[call-arg, unused-ignore]
+            )
     return names
 
 

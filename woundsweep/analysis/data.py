@@ -15,7 +15,9 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from ..config.manifest import Run, load_run
 from ..core.errors import AnalysisError
+from ..core.layout import RunLayout
 from ..core.schema import StageStatus
 from ..store.reader import read_results
 from .settings import REQUIRED_COLUMNS, SHAPE_CODES, STRESS, model_features
@@ -25,38 +27,33 @@ __all__ = [
     "encode_features",
     "load_results",
     "require_columns",
+    "run_or_none",
     "select_rows",
     "skin_codes",
     "sweep_settings",
 ]
 
 
-def sweep_settings(run_dir: Path) -> tuple[dict[str, Any], dict[str, float]]:
+def run_or_none(run_dir: str | Path) -> Run | None:
+    """The run directory's sweep and manifest (`load_run`), or None for a directory that
+    holds a result store alone."""
+    return load_run(run_dir) if RunLayout(run_dir).is_run() else None
+
+
+def sweep_settings(run: Run | None) -> tuple[dict[str, Any], dict[str, float]]:
     """``Sweep.analysis`` and skin type -> Fung c (kPa) of the run, or the paper's defaults."""
-    from ..config.manifest import load_run
     from ..config.paper import Materials
 
-    if (run_dir / "sweep.yaml").is_file() and (run_dir / "manifest.parquet").is_file():
-        sweep = load_run(run_dir).sweep
-        analysis, materials = dataclasses.asdict(sweep.analysis), sweep.materials
+    if run is not None:
+        analysis, materials = dataclasses.asdict(run.sweep.analysis), run.sweep.materials
     else:
         analysis, materials = {}, Materials.table2()
     return analysis, {name: float(p.c_kPa) for name, p in materials.skin_types.items()}
 
 
-def run_element_degree(run_dir: str | Path) -> int | None:
-    """The element degree of a run directory's sweep (None without one)."""
-    from ..config.manifest import load_run
-
-    rd = Path(run_dir)
-    if (rd / "sweep.yaml").is_file() and (rd / "manifest.parquet").is_file():
-        return int(load_run(rd).sweep.solver.element_degree)
-    return None
-
-
 def skin_codes(run_dir: str | Path) -> dict[str, float]:
     """Skin type name -> its Fung ``c`` in kPa: an ordered, physical code for the model."""
-    return sweep_settings(Path(run_dir))[1]
+    return sweep_settings(run_or_none(run_dir))[1]
 
 
 def require_columns(df: pd.DataFrame, where: object) -> pd.DataFrame:
@@ -67,31 +64,31 @@ def require_columns(df: pd.DataFrame, where: object) -> pd.DataFrame:
     return df
 
 
-def load_results(run_dir: str | Path) -> pd.DataFrame:
-    """All rows of ``RUN_DIR/results`` (one per job and stage), validated by the store.
+def load_results(run_dir: str | Path, run: Run | None = None) -> pd.DataFrame:
+    """All rows of ``RUN_DIR/results`` (one per job and stage), validated by the store
+    (``run``: the directory's `run_or_none`, if the caller has it).
 
     A damaged result file raises the store's `StoreError` naming it and the fix.
     """
     rd = Path(run_dir)
-    res = rd / "results"
+    res = RunLayout(rd).results_dir
     if not res.is_dir():
         raise AnalysisError(f"{res}: no result store (run `woundsweep run {run_dir}` first)")
-    df = read_results(rd)
+    df = read_results(rd, run=run)
     if df.empty:
         raise AnalysisError(f"{res}: the result store holds no result files (job-*.parquet)")
     return require_columns(df, res)
 
 
-def drop_orphans(results: pd.DataFrame, run_dir: Path) -> tuple[pd.DataFrame, int]:
-    """The rows of jobs in the run's manifest, and how many rows were not.
+def drop_orphans(results: pd.DataFrame, run: Run | None) -> tuple[pd.DataFrame, int]:
+    """The rows of jobs in the run's manifest (all rows without a run), and how many rows
+    were not.
 
     Rows of jobs that a regenerated manifest no longer holds belong to another sweep.
     """
-    if not (run_dir / "manifest.parquet").is_file():
+    if run is None:
         return results, 0
-    in_manifest = results["job_id"].isin(
-        set(pd.read_parquet(run_dir / "manifest.parquet", columns=["job_id"])["job_id"])
-    )
+    in_manifest = results["job_id"].isin(set(run.manifest["job_id"]))
     return results[in_manifest], int((~in_manifest).sum())
 
 

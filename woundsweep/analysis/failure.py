@@ -11,7 +11,7 @@ a split without both outcomes in training, no model is trained and the metrics s
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from typing import Any, NamedTuple
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 import pandas as pd
@@ -33,13 +33,16 @@ from .settings import (
 from .splits import geometry_groups, geometry_split
 from .training import dmatrix
 
+if TYPE_CHECKING:
+    import xgboost as xgb
+
 __all__ = ["FailureFit", "failure_matrix", "fit_failure", "job_table", "predict_failure"]
 
 
 class FailureFit(NamedTuple):
     """The booster (``None`` when none could be trained), metrics and metadata."""
 
-    booster: Any
+    booster: xgb.Booster | None
     metrics: dict[str, Any]
     meta: dict[str, Any]
 
@@ -54,7 +57,7 @@ def failure_matrix(X: np.ndarray, features: Sequence[str] = FEATURES) -> np.ndar
     return X[:, [list(features).index(f) for f in job_features(features)]]
 
 
-def predict_failure(booster: Any, X: np.ndarray, nthread: int = 2) -> np.ndarray:
+def predict_failure(booster: xgb.Booster, X: np.ndarray, nthread: int = 2) -> np.ndarray:
     """Failure probabilities of the jobs in ``X`` (the booster's columns: `job_features`)."""
     names = list(booster.feature_names or JOB_FEATURES)
     return np.asarray(

@@ -21,6 +21,8 @@ from matplotlib.figure import Figure  # noqa: E402
 from .settings import STAGE_GROUPS  # noqa: E402
 
 if TYPE_CHECKING:
+    from matplotlib.axes import Axes
+
     from .fitting import SchemeFit
     from .regression import SurrogateFit
 
@@ -50,7 +52,7 @@ FIGURE_STEMS = {
 }
 
 
-def plain_log(ax: Any, which: str = "xy") -> None:
+def plain_log(ax: Axes, which: str = "xy") -> None:
     """Log-scaled axes labelled with plain numbers (2, 5, 10, 20, not 2x10^0): ticks at 1-2-3-5
     or 1-2-5 per decade over a short range, fewer over a long one, no minor labels. Call it after
     plotting (the ticks follow the data's range)."""
@@ -179,8 +181,13 @@ def stress_distribution(stress: np.ndarray, stage: np.ndarray, edges: np.ndarray
     for name, stages in STAGE_GROUPS:
         sel = np.isin(stage, stages)
         if sel.any():
+            # matplotlib's stub: bins takes no array (its docs and code take one).
             ax.hist(
-                s[sel], bins=bins, histtype="step", lw=1.5, label=f"{name} (n={int(sel.sum())})"
+                s[sel],
+                bins=bins,  # type: ignore[arg-type]
+                histtype="step",
+                lw=1.5,
+                label=f"{name} (n={int(sel.sum())})",
             )
     if edges is not None:
         for e in edges[1:-1]:

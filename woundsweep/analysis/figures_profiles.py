@@ -7,7 +7,7 @@ histogram of the position of each line's maximum (`profile_locations`).
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING
 
 import matplotlib
 
@@ -22,6 +22,9 @@ from ..core.schema import PROFILE_LINES  # noqa: E402
 from .profile_locations import bin_edges, profile_counts  # noqa: E402
 from .settings import STAGE_GROUPS  # noqa: E402
 
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
+
 __all__ = ["profile_max_locations"]
 
 _TITLES = {
@@ -33,7 +36,7 @@ _TITLES = {
 _L, _W, _T = 1.0, 0.5, 0.6
 
 
-def _schematic(ax: Any, line: str) -> None:
+def _schematic(ax: Axes, line: str) -> None:
     """The patch in top view (x, y) or section (x, z) with the wound and the line in red."""
     section = line == "through_thickness"
     h = (-_T, 0.0) if section else (-_L, _L)

@@ -9,7 +9,7 @@ that factor, or with no other factor, are left out (and counted).
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import pandas as pd
@@ -113,7 +113,7 @@ def mesh_sensitivity(rows: pd.DataFrame, metrics: dict[str, Any]) -> dict[str, A
             }
             for f, g in s.groupby(MESH, sort=True)
         }
-        stages[str(int(stage))] = {
+        stages[str(int(cast(float, stage)))] = {  # a group key: any Scalar to pandas-stubs
             "groups": int(s["group"].nunique()),
             "median_abs_rel_diff": float(np.median(rel)),
             "max_abs_rel_diff": float(np.max(rel)),

@@ -17,9 +17,12 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 
 from ..core.errors import AnalysisError
 from ..core.fsutil import atomic_write_bytes
+from ..core.layout import RunLayout
 from ..core.versions import FAILURE_FORMAT, MODEL_FORMAT, SURROGATE_FORMAT
 
 if TYPE_CHECKING:
+    import xgboost as xgb
+
     from .failure import FailureFit
     from .fitting import SchemeFit
     from .regression import SurrogateFit
@@ -48,7 +51,7 @@ class LoadedModel(NamedTuple):
     """
 
     path: Path
-    booster: Any
+    booster: xgb.Booster
     meta: dict[str, Any]
     surrogate: tuple[Any, dict[str, Any]] | None = None
     failure: tuple[Any, dict[str, Any]] | None = None
@@ -68,7 +71,9 @@ def save_model(out_dir: Path, fit: SchemeFit) -> list[Path]:
     return [model_path, meta_path]
 
 
-def save_booster(out_dir: Path, stem: str, booster: Any, meta: dict[str, Any]) -> list[Path]:
+def save_booster(
+    out_dir: Path, stem: str, booster: xgb.Booster | None, meta: dict[str, Any]
+) -> list[Path]:
     """Write ``stem.json`` (unless ``booster`` is None) and ``stem_meta.json`` atomically."""
     paths = []
     if booster is not None:
@@ -86,7 +91,7 @@ def save_companions(out_dir: Path, surrogate: SurrogateFit, failure: FailureFit)
     )
 
 
-def _read_booster(path: Path) -> Any:
+def _read_booster(path: Path) -> xgb.Booster:
     import xgboost as xgb
 
     booster = xgb.Booster()
@@ -123,13 +128,14 @@ def resolve_model_path(path: str | Path, scheme: str | None = None) -> Path:
         return p
     if not p.is_dir():
         raise AnalysisError(f"{p}: no such model file or run directory")
-    for d in (p / "analysis", p):
+    layout = RunLayout(p)
+    for d in (layout.analysis_dir, p):
         for s in [scheme] if scheme else ["geometry", "random"]:
             if (d / f"model_{s}.json").is_file():
                 return d / f"model_{s}.json"
-    if not (p / "manifest.parquet").is_file() and not p.name == "analysis":
+    if not layout.manifest.is_file() and p != RunLayout(p.parent).analysis_dir:
         raise AnalysisError(
-            f"{p}: not a run directory (no manifest.parquet) and no model_<split>.json in it;"
+            f"{p}: not a run directory (no {layout.manifest.name}) and no model_<split>.json in it;"
             " give a run directory after `woundsweep analyze`, its analysis/ or a model file"
         )
     raise AnalysisError(f"{p}: no trained model found (run `woundsweep analyze {p}` first)")

@@ -13,7 +13,7 @@ import os
 import shutil
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
@@ -22,11 +22,13 @@ from ..config.analysis import resolve_settings
 from ..config.solver import element_name
 from ..core.errors import AnalysisError
 from ..core.fsutil import atomic_write_bytes
+from ..core.layout import ANALYSIS_METRICS, ANALYSIS_REPORT, RunLayout
+from ..store.reader import rows_element_degree
 from .data import (
     drop_orphans,
     encode_features,
     load_results,
-    run_element_degree,
+    run_or_none,
     select_rows,
     sweep_settings,
 )
@@ -46,6 +48,11 @@ from .settings import (
 )
 from .trained_on import trained_on
 
+if TYPE_CHECKING:
+    import pandas as pd
+
+    from ..config.analysis import ModelSettings
+
 __all__ = ["AnalysisOutput", "analysis_steps", "run_analysis"]
 
 
@@ -55,7 +62,7 @@ def analysis_steps(n_schemes: int) -> int:
 
 
 def _surrogate(
-    rows: Any, X: np.ndarray, settings: Any, say: Callable[[str], None]
+    rows: pd.DataFrame, X: np.ndarray, settings: ModelSettings, say: Callable[[str], None]
 ) -> tuple[Any, dict[str, Any]]:
     """The stress surrogate and its metrics with Sobol indices; or None and why not."""
     from .regression import fit_surrogate
@@ -109,12 +116,13 @@ def run_analysis(
         if s not in SCHEMES:
             raise AnalysisError(f"unknown split scheme {s!r} (expected one of {SCHEMES})")
     say("reading the results...")
-    sweep_analysis, skins = sweep_settings(rd)
-    degree = run_element_degree(rd)
+    run = run_or_none(rd)  # the sweep and manifest, read once for every step below
+    sweep_analysis, skins = sweep_settings(run)
     settings = resolve_settings(sweep_analysis, overrides)
     q = settings.quantiles
-    results, orphans = drop_orphans(load_results(rd), rd)
-    record = trained_on(rd, results)
+    results, orphans = drop_orphans(load_results(rd, run), run)
+    degree = rows_element_degree(results)
+    record = trained_on(run, results)
     rows, counts = select_rows(results, drop_interpenetrating, keep_reopened)
     counts["rows_not_in_manifest"] = orphans
     if len(rows) < MIN_ROWS_PER_QUANTILE * q:
@@ -141,7 +149,7 @@ def run_analysis(
         "stress": STRESS,
         "stress_units": "kPa",
         "element_degree": degree,
-        "element": element_name(degree) if degree is not None else "unknown (no sweep)",
+        "element": element_name(degree) if degree is not None else "unknown",
         "features": list(features),
         "importance_groups": {
             k: list(v) for k, v in IMPORTANCE_GROUPS.items() if set(v) & set(features)
@@ -163,7 +171,7 @@ def run_analysis(
         "max_location_profiles": profile_summary(pos),
     }
     metrics["mesh_sensitivity"] = mesh_sensitivity(rows, metrics)
-    final = Path(out_dir) if out_dir is not None else rd / "analysis"
+    final = Path(out_dir) if out_dir is not None else RunLayout(rd).analysis_dir
     out = _staging_dir(final)
     files: list[Path] = []
     for f in fits:
@@ -185,11 +193,11 @@ def run_analysis(
     if surrogate is not None:
         figs += figures.write_surrogate(out, surrogate, rows, surrogate_metrics["sensitivity"])
     files += figs
-    metrics_path = out / "metrics.json"
+    metrics_path = out / ANALYSIS_METRICS
     atomic_write_bytes(metrics_path, json_bytes(metrics))
     files.append(metrics_path)
     say("writing metrics.json and report.md...")
-    report_path = out / "report.md"
+    report_path = out / ANALYSIS_REPORT
     write_report(report_path, metrics, [p.name for p in figs])
     files.append(report_path)
     _swap_in(out, final)

@@ -230,7 +230,7 @@ def predict_wound(
         params["mesh_size_factor"] = finest_mesh(meta, shape)
     values, flagged = _check_params(meta, params)
     if model.surrogate is not None:  # its training rows may differ (the random split's do)
-        sur_meta = {**meta, **{k: model.surrogate[1][k] for k in ("ranges", "features")
+        sur_meta: dict[str, Any] = {**meta, **{k: model.surrogate[1][k] for k in ("ranges", "features")
                                if k in model.surrogate[1]}}  # fmt: skip
         own = _check_params(sur_meta, params)[1]
         flagged += [f"surrogate: {f}" for f in own if f not in flagged]
@@ -299,7 +299,7 @@ def _surrogate(
 
     hw = half_widths(model.surrogate[1]["calibration_scores_log"], stages, level)
     est = [float(np.exp(v)) for v in log_est]
-    bounds = [
+    bounds: list[tuple[float | None, float | None]] = [
         (float(np.exp(v - h)), float(np.exp(v + h))) if np.isfinite(h) else (None, None)
         for v, h in zip(log_est, hw)
     ]

@@ -1,7 +1,7 @@
 """Where each profile line's maximum sits (the paper's Figure 2 as it was computed).
 
-The solver stores per converged stage, in the row's ``stage_extra_json``, the running
-coordinate (mm) of each line's maximum (`woundsweep.physics.profiles`: ``profile_<line>_max_at_mm``).
+The solver stores per converged stage, in the row's ``profile_<line>_max_at_mm`` column, the
+running coordinate (mm) of each line's maximum (`woundsweep.physics.profiles`).
 Positions are normalised as the global maximum's (`paper.normalised_locations`): along the
 wound (y + L) / 2L, through the thickness -z / T, across the patch (x - w/2) / (L + w/2).
 Each line holds `PROFILE_POINTS` samples; a bin holds `POINTS_PER_BIN` neighbouring samples,
@@ -15,7 +15,6 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from ..core.diagnostics import parse_diagnostics
 from ..core.schema import PROFILE_LINES, PROFILE_POINTS
 from .paper import along_half_length
 from .settings import STAGE_GROUPS
@@ -59,24 +58,17 @@ def profile_positions(rows: pd.DataFrame) -> pd.DataFrame:
     """Per row its stage group and, per line, the sample index (0..99) of the line's maximum.
 
     Columns ``stage_group`` and ``<line>_index`` (float, NaN where the row stores no position
-    for that line; rows from a solver before the profiles, or a line that missed the mesh).
+    for that line: a stage that did not converge, or a line that missed the mesh).
     """
     stage = rows["stage"].to_numpy()
     group = np.full(len(rows), "", dtype=object)
     for name, stages in STAGE_GROUPS:
         group[np.isin(stage, stages)] = name
-    extra = rows["stage_extra_json"] if "stage_extra_json" in rows else pd.Series(None, rows.index)
-    parsed = [parse_diagnostics(s) for s in extra]
     out = pd.DataFrame({"stage_group": group})
     for line in PROFILE_LINES:
-        key = f"profile_{line}_max_at_mm"
-        at = np.array([_num(d.get(key)) for d in parsed], dtype=float)
+        at = rows[f"profile_{line}_max_at_mm"].to_numpy(dtype=float)
         out[f"{line}_index"] = _fraction(line, at, rows) * (PROFILE_POINTS - 1)
     return out
-
-
-def _num(v: Any) -> float:
-    return float(v) if isinstance(v, (int, float)) and not isinstance(v, bool) else np.nan
 
 
 def bin_edges(line: str) -> np.ndarray:
@@ -116,7 +108,7 @@ def profile_summary(pos: pd.DataFrame) -> dict[str, Any]:
             }
         groups[name] = {"rows": int(len(sel)), "lines": lines}
     return {
-        "source": "stage_extra_json profile_<line>_max_at_mm",
+        "source": "profile_<line>_max_at_mm columns",
         "normalisation": dict(PROFILE_NORMALISATION),
         "points_per_line": PROFILE_POINTS,
         "points_per_bin": POINTS_PER_BIN,

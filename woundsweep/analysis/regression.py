@@ -11,7 +11,7 @@ calibration or test rows was seen in training, so the intervals are meant for a 
 from __future__ import annotations
 
 import dataclasses
-from typing import Any, NamedTuple
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 import pandas as pd
@@ -25,6 +25,9 @@ from .evaluation import feature_importance, shap_importance
 from .settings import COVERAGE_LEVELS, STRESS, model_features
 from .splits import geometry_groups, geometry_split
 from .training import booster_features, dmatrix
+
+if TYPE_CHECKING:
+    import xgboost as xgb
 
 __all__ = ["SurrogateFit", "SurrogateSplit", "fit_surrogate", "predict_log", "surrogate_split"]
 
@@ -41,7 +44,7 @@ class SurrogateSplit(NamedTuple):
 class SurrogateFit(NamedTuple):
     """The booster, its split, the test predictions (log kPa), metrics and metadata."""
 
-    booster: Any  # xgboost.Booster
+    booster: xgb.Booster
     split: SurrogateSplit
     pred_test: np.ndarray
     metrics: dict[str, Any]
@@ -63,7 +66,7 @@ def surrogate_split(groups: np.ndarray, settings: ModelSettings) -> SurrogateSpl
     )
 
 
-def predict_log(booster: Any, X: np.ndarray, nthread: int = 2) -> np.ndarray:
+def predict_log(booster: xgb.Booster, X: np.ndarray, nthread: int = 2) -> np.ndarray:
     """The surrogate's log p99 (log kPa) for the rows of ``X`` (the booster's columns), float64."""
     d = dmatrix(X, nthread=nthread, features=booster_features(booster))
     return np.asarray(booster.predict(d), dtype=np.float64)

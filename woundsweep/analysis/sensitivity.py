@@ -15,11 +15,14 @@ whole box.
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from typing import Any, NamedTuple
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
 from .settings import FEATURES, IMPORTANCE_GROUPS, SHAPE_CODES, SHAPE_FACTORS
+
+if TYPE_CHECKING:
+    import xgboost as xgb
 
 __all__ = ["SobolInput", "sobol_indices", "surrogate_inputs", "surrogate_sobol"]
 
@@ -113,7 +116,8 @@ def surrogate_inputs(meta: dict[str, Any]) -> tuple[list[SobolInput], dict[str, 
         if not set(members) & columns:
             continue
         if group == "wound_shape":
-            levels = tuple(SHAPE_CODES[s] for s in sorted(ranges, key=SHAPE_CODES.get))
+            # Every trained shape has a code (the key never returns None).
+            levels = tuple(SHAPE_CODES[s] for s in sorted(ranges, key=SHAPE_CODES.get))  # type: ignore[arg-type]
         elif group == "skin_type":
             levels = tuple(sorted(float(c) for c in meta["skin_levels_c_kPa"]))
         elif group == "stage":
@@ -187,7 +191,7 @@ def surrogate_function(
 
 
 def surrogate_sobol(
-    booster: Any, meta: dict[str, Any], n_base: int, seed: int, nthread: int = 2
+    booster: xgb.Booster, meta: dict[str, Any], n_base: int, seed: int, nthread: int = 2
 ) -> dict[str, Any]:
     """Sobol indices of the surrogate's log p99 over its training grid (`fit_surrogate` meta)."""
     from .regression import predict_log

@@ -104,7 +104,7 @@ CONVERGENCE_FAILURES = (FailureClass.NOT_CONVERGED.value, FailureClass.TIMEOUT.v
 MIN_FAILED_JOBS = 10
 
 
-def model_features(shapes: Iterable[str]) -> tuple[str, ...]:
+def model_features(shapes: Iterable[object]) -> tuple[str, ...]:
     """The model columns for rows of these wound shapes: `FEATURES` for trenches alone,
     `FUSIFORM_FEATURES` once a fusiform excision is among them."""
     return FUSIFORM_FEATURES if "fusiform" in set(shapes) else FEATURES

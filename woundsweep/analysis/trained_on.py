@@ -15,24 +15,22 @@ from typing import Any
 
 import pandas as pd
 
+from ..config.manifest import Run, load_run
+from ..core.layout import RunLayout
 from ..store.identity import results_fingerprint, settings_fingerprint
 
 __all__ = ["model_run_dir", "stale_note", "trained_on"]
 
 
-def _settings(run_dir: Path) -> str | None:
-    from ..config.manifest import load_run
-
-    if not (run_dir / "manifest.parquet").is_file() or not (run_dir / "sweep.yaml").is_file():
-        return None
-    run = load_run(run_dir)
-    return settings_fingerprint(run.sweep, run.manifest)
+def _settings(run: Run | None) -> str | None:
+    return None if run is None else settings_fingerprint(run.sweep, run.manifest)
 
 
-def trained_on(run_dir: Path, results: pd.DataFrame) -> dict[str, Any]:
-    """The record of an analysis of ``run_dir`` that read ``results``."""
+def trained_on(run: Run | None, results: pd.DataFrame) -> dict[str, Any]:
+    """The record of an analysis of ``run`` (None: a result store without a sweep) that
+    read ``results``."""
     return {
-        "settings_fingerprint": _settings(run_dir),
+        "settings_fingerprint": _settings(run),
         "results_fingerprint": results_fingerprint(results),
         "result_rows": int(len(results)),
     }
@@ -40,19 +38,27 @@ def trained_on(run_dir: Path, results: pd.DataFrame) -> dict[str, Any]:
 
 def model_run_dir(model_path: Path) -> Path | None:
     """The run directory of a model file in ``RUN_DIR/analysis/`` (None elsewhere)."""
-    rd = model_path.resolve().parent.parent
-    return rd if model_path.resolve().parent.name == "analysis" else None
+    folder = model_path.resolve().parent
+    rd = folder.parent
+    return rd if folder == RunLayout(rd).analysis_dir else None
 
 
 def stale_note(
-    run_dir: Path, record: Mapping[str, Any] | None, results: pd.DataFrame | None = None
+    run_dir: Path,
+    record: Mapping[str, Any] | None,
+    results: pd.DataFrame | None = None,
+    run: Run | None = None,
 ) -> str:
     """ "" if the analysis recorded by ``record`` matches the run now, else why not (the
-    results are compared only when given)."""
-    where = run_dir / "analysis"
+    results are compared only when given). ``run`` is the run directory already loaded, if
+    the caller has it."""
+    layout = RunLayout(run_dir)
+    where = layout.analysis_dir
     if not isinstance(record, Mapping):
         return f"{where} does not record what it was trained on; rerun `woundsweep analyze`"
-    if record.get("settings_fingerprint") != _settings(run_dir):
+    if run is None and layout.is_run():
+        run = load_run(run_dir)
+    if record.get("settings_fingerprint") != _settings(run):
         return (
             f"{where} is stale: the run's sweep or manifest changed since it was trained "
             f"(rerun `woundsweep analyze {run_dir}`)"

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any, NamedTuple
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
@@ -11,13 +11,16 @@ from ..config.analysis import ModelSettings
 from .settings import FEATURES
 from .splits import Split
 
+if TYPE_CHECKING:
+    import xgboost as xgb
+
 __all__ = ["Trained", "booster_features", "dmatrix", "predict_proba", "train_model"]
 
 
 class Trained(NamedTuple):
     """A booster cut to its best round, with the per-round evaluation log."""
 
-    booster: Any  # xgboost.Booster
+    booster: xgb.Booster
     best_iteration: int  # 0-based; the booster holds rounds 0..best_iteration
     rounds_run: int
     eval_log: dict[str, dict[str, list[float]]]
@@ -63,12 +66,12 @@ def train_model(
     return Trained(booster[: best + 1], best, rounds, log)
 
 
-def booster_features(booster: Any) -> list[str]:
+def booster_features(booster: xgb.Booster) -> list[str]:
     """The columns a booster was trained on (`FEATURES` for one saved without names)."""
     return list(booster.feature_names or FEATURES)
 
 
-def predict_proba(booster: Any, X: np.ndarray, nthread: int = 2) -> np.ndarray:
+def predict_proba(booster: xgb.Booster, X: np.ndarray, nthread: int = 2) -> np.ndarray:
     """Class probabilities (rows x q), renormalised in float64 (XGBoost sums in float32);
     ``X`` has the booster's columns."""
     d = dmatrix(X, nthread=nthread, features=booster_features(booster))

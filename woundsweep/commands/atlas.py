@@ -3,10 +3,15 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 import click
 from tqdm import tqdm
+
+if TYPE_CHECKING:
+    import pandas as pd
+
+    from ..config.manifest import Run
 
 __all__ = ["cmd"]
 
@@ -15,34 +20,32 @@ def _mb(n: float) -> str:
     return f"{n / 1e6:.1f} MB"
 
 
-# The run's own directories: a site written there would mix with (or replace) the store.
-_RUN_PARTS = ("results", "fields", "logs", "meshes", "tmp", "corrupt", "analysis", "slurm")
-
-
 def _check_out(run_dir: Path, out: Path) -> None:
-    """--out must not be the run directory, hold it, or be one of its store's directories."""
+    """--out must not be the run directory, hold it, or be one of its own directories (a site
+    written there would mix with, or replace, the store)."""
     from ..core.errors import StoreError
+    from ..core.layout import RunLayout
 
     rd, target = run_dir.resolve(), out.resolve()
-    if target == rd or target in rd.parents or (target.parent == rd and target.name in _RUN_PARTS):
+    if target == rd or target in rd.parents or target in RunLayout(rd).own_dirs:
         raise StoreError(
             f"--out {out}: would write into the run directory {run_dir} (use a new directory)"
         )
 
 
-def _warn_if_stale(run_dir: Path, results: Any) -> None:
+def _warn_if_stale(run: Run, results: pd.DataFrame) -> None:
     """A line on stderr when RUN_DIR/analysis was trained on other settings or results."""
     import json
 
     from ..analysis.trained_on import stale_note
     from ..core.errors import one_line
 
-    path = run_dir / "analysis" / "metrics.json"
+    path = run.layout.analysis_metrics
     try:
         record = json.loads(path.read_text()).get("trained_on")
     except (OSError, ValueError, AttributeError):
         return  # no analysis (or none readable): the site has no analysis section to doubt
-    note = stale_note(run_dir, record, results)
+    note = stale_note(run.run_dir, record, results, run)
     if note:
         click.echo(one_line(f"woundsweep: warning: {note}"), err=True)
 
@@ -72,21 +75,21 @@ def cmd(run_dir: Path, out: Path | None, views: str) -> None:
     from ..config.manifest import load_run
     from ..core.errors import WoundsweepError
     from ..core.fsutil import check_output_dir
-    from ..store.reader import read_results
+    from ..store.reader import read_results, result_files
     from ..viz.atlas import build_atlas, parse_views
 
     run = load_run(run_dir)
-    out = out or run.run_dir / "atlas"
+    out = out or run.layout.atlas_dir
     _check_out(run.run_dir, out)
     try:
         check_output_dir(out)
     except ValueError as err:
         raise WoundsweepError(f"--out {err}") from None
     chosen = parse_views(views, [int(j) for j in run.manifest["job_index"]])
-    n_files = len(list((run.run_dir / "results").glob("job-*.parquet")))
+    n_files = len(result_files(run.run_dir)[0])
     click.echo(f"reading and validating {n_files} result files ...", err=True)
-    results = read_results(run.run_dir)
-    _warn_if_stale(run.run_dir, results[results["job_id"].isin(set(run.manifest["job_id"]))])
+    results = read_results(run.run_dir, run=run)
+    _warn_if_stale(run, results[results["job_id"].isin(set(run.manifest["job_id"]))])
     stored = set(int(j) for j in results["job_index"].unique())
     has_fields = results["fields_file"].fillna("").astype(str) != ""
     with_fields = set(int(j) for j in results.loc[has_fields, "job_index"].unique())

@@ -115,7 +115,7 @@ def _fit_lines(study: dict[str, Any]) -> list[str]:
 @click.option("--levels", type=int, default=3, show_default=True, help="Number of meshes (>= 3).")
 @click.option(
     "--ratio", type=float, default=1.5, show_default=True,
-    help="Mesh size factor ratio between levels (element sizes shrink by ratio^(2/3)).",
+    help="Mesh size factor ratio between levels (element sizes shrink by ratio^(1/3)).",
 )  # fmt: skip
 @click.option(
     "--factors", "factors_text", default=None, metavar="LIST",

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from collections import Counter
 from pathlib import Path
+from typing import Any
 
 import click
 from tqdm import tqdm
@@ -69,11 +70,12 @@ def cmd(
         if _notes_line(info):
             click.echo(f"job {job}: not exported: {_notes_line(info)}")
         return
-    results = read_results(run.run_dir)
+    results = read_results(run.run_dir, run=run)
     man = run.manifest[run.manifest["job_id"].isin(set(results["job_id"]))]
     man = man.sort_values(["geometry_id", "job_index"])
     reasons: Counter[str] = Counter()
-    n_stages, cache = 0, {}
+    n_stages = 0
+    cache: dict[Any, Any] = {}
     by_job = dict(tuple(results.groupby("job_id")))
     for row in tqdm(man.to_dict("records"), desc="export", unit="job", leave=False):
         info = export_job(load_job(run, row, by_job[row["job_id"]], cache), out, xdmf)

@@ -13,6 +13,7 @@ from ..config.manifest import expand
 from ..config.sweep import MANIFEST_COLUMNS, MAX_JOBS, Sweep, parse_sweep_text, read_sweep_text
 from ..core.errors import GeometryError, StoreError, SweepError
 from ..core.fsutil import atomic_write, atomic_write_bytes
+from ..core.layout import RunLayout
 from ..core.provenance import provenance
 from ..core.runlock import hold_run, release
 
@@ -20,7 +21,7 @@ __all__ = ["cmd", "generate", "stale_results"]
 
 
 def _existing_sweep(run_dir: Path) -> dict | None:
-    path = run_dir / "sweep.yaml"
+    path = RunLayout(run_dir).sweep
     if not path.exists():
         return None
     try:
@@ -91,13 +92,14 @@ def generate(
     manifest = expand(sweep, max_jobs)
     _check_cell_cap(sweep, manifest)
     rd = Path(run_dir)
+    layout = RunLayout(rd)
     if rd.exists() and not rd.is_dir():
         raise StoreError(f"{rd}: exists and is not a directory")
     old = _existing_sweep(rd)
     new = json.loads(json.dumps(sweep.resolved() | {"path": None}))
     if old is not None:
         same = json.loads(json.dumps(old | {"path": None})) == new
-        if same and _manifest_matches(rd / "manifest.parquet", manifest):
+        if same and _manifest_matches(layout.manifest, manifest):
             return len(manifest), False
         if not force and not same:
             raise StoreError(
@@ -106,8 +108,8 @@ def generate(
             )
         if not force:
             raise StoreError(
-                f"{rd / 'manifest.parquet'}: missing, damaged or not the expansion of "
-                f"{rd / 'sweep.yaml'} (use --force to rewrite it; results are kept)"
+                f"{layout.manifest}: missing, damaged or not the expansion of "
+                f"{layout.sweep} (use --force to rewrite it; results are kept)"
             )
     # Over an existing run, only while no `woundsweep run` holds it: a runner stamps its
     # results with the sweep it loaded when it started.
@@ -124,9 +126,10 @@ def _write_run(
     rd: Path, sweep_path: str | Path, text: str, sweep: Sweep, manifest: pd.DataFrame, new: dict
 ) -> None:
     """Write the manifest, the provenance record and (last) the sweep copy."""
+    layout = RunLayout(rd)
     try:
         rd.mkdir(parents=True, exist_ok=True)
-        atomic_write(rd / "manifest.parquet", lambda tmp: manifest.to_parquet(tmp, index=False))
+        atomic_write(layout.manifest, lambda tmp: manifest.to_parquet(tmp, index=False))
         prov = provenance() | {
             "sweep_file": str(Path(sweep_path).resolve()),
             "sweep_name": sweep.name,
@@ -135,9 +138,9 @@ def _write_run(
             "units": {"length": "mm", "stress": "kPa", "force": "mN", "time": "s"},
             "resolved_sweep": new,
         }
-        atomic_write_bytes(rd / "provenance.json", (json.dumps(prov, indent=2) + "\n").encode())
+        atomic_write_bytes(layout.provenance, (json.dumps(prov, indent=2) + "\n").encode())
         # The sweep copy goes last: its presence marks a complete generate.
-        atomic_write_bytes(rd / "sweep.yaml", text.encode())
+        atomic_write_bytes(layout.sweep, text.encode())
     except OSError as err:
         where = err.filename or rd
         raise StoreError(f"{where}: cannot write the run directory ({err.strerror})") from None
@@ -168,7 +171,7 @@ def cmd(sweep_file: Path, run_dir: Path, force: bool, max_jobs: int) -> None:
     if not written:
         click.echo(f"{run_dir} is up to date ({n} jobs, same sweep): nothing to do")
         return
-    click.echo(f"{n} jobs written to {run_dir / 'manifest.parquet'}")
+    click.echo(f"{n} jobs written to {RunLayout(run_dir).manifest}")
     from ..config.manifest import load_run
 
     run = load_run(run_dir)

@@ -3,18 +3,19 @@
 from __future__ import annotations
 
 import statistics
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import click
 import numpy as np
 import pandas as pd
 from tqdm import tqdm
 
-from ..config.manifest import Run, load_run
+from ..config.manifest import JobRow, Run, load_run
 from ..core.errors import GeometryError, StoreError
 from ..core.fsutil import atomic_write, check_output_file
-from ..mesh.build import MeshData
+from ..core.schema import MeshData
 from ..mesh.cache import CachedMesh, get_mesh
 
 __all__ = ["cmd", "mesh_geometry", "write_vtu"]
@@ -66,12 +67,13 @@ def write_vtu(path: str | Path, mesh: MeshData) -> None:
     atomic_write(path, _write)
 
 
-def mesh_geometry(run: Run, row: pd.Series) -> CachedMesh:
+def mesh_geometry(run: Run, row: JobRow | pd.Series) -> CachedMesh:
     """Build or reuse the mesh of the geometry of manifest ``row`` with the sweep's closure
     zone and element degree (errors name its job)."""
-    spec = run.geometry(row)  # GeometryError names the job
+    # A Series is read by column name like a Mapping (pandas-stubs: not a Mapping).
+    spec = run.geometry(cast("Mapping[str, Any]", row))  # GeometryError names the job
     try:
-        return get_mesh(run.run_dir, str(row["geometry_id"]), spec)
+        return get_mesh(run.run_dir, spec)
     except GeometryError as err:
         raise GeometryError(f"job {int(row['job_index'])}: {err}") from None
 
@@ -86,7 +88,8 @@ def _line(gid: str, rows: pd.DataFrame, got: CachedMesh) -> str:
     when = "reused from cache (built in" if got.status == "cached" else f"{got.status} in"
     end = ")" if got.status == "cached" else ""
     return (
-        f"geometry {gid} ({_jobs(rows)}): {info['cells']} cells, {info['vertices']} vertices, "
+        f"geometry {gid} ({_jobs(rows)}): mesh {got.path.stem}, {info['cells']} cells, "
+        f"{info['vertices']} vertices, "
         f"min SICN {info['min_quality']:.3f}, {when} {info['build_time_s']:.2f} s{end}"
     )
 
@@ -106,7 +109,9 @@ def cmd(
 ) -> None:
     """Build (or reuse from RUN_DIR/meshes/) the tetrahedral mesh of wound geometries.
 
-    Prints cells, vertices, the minimum element quality (gmsh's minSICN) and the build time.
+    Each mesh is cached as meshes/<mesh id>.npz, the id a hash of everything that determines
+    it (geometry, mesh size factor, closure zone, element degree, size law version). Prints
+    the mesh id, cells, vertices, the minimum element quality (gmsh's minSICN) and the build time.
     With --all a failing geometry does not stop the others; failures are listed at the end
     (exit status 4).
     """

@@ -10,12 +10,15 @@ from __future__ import annotations
 import json
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import click
 
 from ..analysis.prediction import MAX_PARAMETER
 from ..clitypes import FiniteFloat
+
+if TYPE_CHECKING:
+    from ..analysis.model_io import LoadedModel
 
 __all__ = ["cmd", "parse_params"]
 
@@ -89,13 +92,14 @@ def parse_params(
     return params
 
 
-def _warn_if_stale(loaded: Any) -> None:
+def _warn_if_stale(loaded: LoadedModel) -> None:
     """A line on stderr when the model's run has changed its settings since `analyze`."""
     from ..analysis.trained_on import model_run_dir, stale_note
     from ..core.errors import one_line
+    from ..core.layout import RunLayout
 
     run_dir = model_run_dir(loaded.path)
-    if run_dir is not None and (run_dir / "manifest.parquet").is_file():
+    if run_dir is not None and RunLayout(run_dir).manifest.is_file():
         note = stale_note(run_dir, loaded.meta.get("trained_on"))
         if note:
             click.echo(one_line(f"woundsweep: warning: {note}"), err=True)

@@ -9,6 +9,7 @@ import click
 
 from ..clitypes import FiniteFloat
 from ..core.errors import StoreError
+from ..core.layout import RunLayout
 from ..core.schema import FailureClass, parse_stage_range
 from ..execution.runner import RunOptions, RunSummary, run_shard
 from ..execution.shards import parse_shard
@@ -40,7 +41,7 @@ def _summary_line(s: RunSummary, run_dir: Path) -> str:
     return (
         f"{s.jobs} jobs in shard: {s.skipped} already done, {s.ran} run"
         f"{' (' + classes + ')' if classes else ''}, {s.attempts} attempts, "
-        f"{s.wall_time_s:.0f} s; results in {run_dir / 'results'}"
+        f"{s.wall_time_s:.0f} s; results in {RunLayout(run_dir).results_dir}"
     )
 
 

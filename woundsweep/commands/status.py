@@ -12,7 +12,7 @@ from ..config.manifest import load_run
 from ..config.solver import element_name
 from ..core.schema import FailureClass
 from ..execution.summary import summarize
-from ..store.reader import scan_results, scan_store
+from ..store.reader import rows_element_degree, scan_results, scan_store
 
 __all__ = ["cmd", "format_status"]
 
@@ -96,12 +96,14 @@ def cmd(run_dir: Path, as_json: bool) -> None:
     `woundsweep run`: it recomputes them, moving damaged files to RUN_DIR/corrupt/).
     """
     run = load_run(run_dir)
-    scan = scan_store(run.run_dir)
-    s = summarize(run.manifest, scan_results(scan), scan)
-    degree = run.sweep.solver.element_degree
+    scan = scan_store(run.run_dir, run=run)
+    rows = scan_results(scan)
+    s = summarize(run.manifest, rows, scan)
+    degree = rows_element_degree(rows)  # the stored results' element (None: none stored)
+    name = element_name(degree) if degree is not None else None
     if as_json:
-        element = {"element_degree": degree, "element": element_name(degree)}
+        element = {"element_degree": degree, "element": name}
         click.echo(json.dumps({"run_dir": str(run.run_dir), **element, **s}, indent=2))
     else:
-        click.echo(f"sweep {run.sweep.name}: element {element_name(degree)}")
+        click.echo(f"sweep {run.sweep.name}: element {name or 'n/a (no stored results)'}")
         click.echo(format_status(s))

@@ -8,8 +8,8 @@ the load after closure and the numerical settings, each default written once her
 - The patch: a margin of `MARGIN_PER_LENGTH` wound lengths on every side (the stage-2 closing
   force changes by about 3 % from 2.7 l to 5.3 l, docs/validation.md "The fusiform excision").
 - The closure zone (the walls the sutures hold): the whole length, down to the bite depth.
-- P2 elements (docs/model.md "Element": P1's closing force keeps falling with refinement) at
-  mesh size factor `MESH_SIZE_FACTOR`.
+- The solver's element (`SolverSettings.element_degree`, P2: docs/model.md "Element", P1's
+  closing force keeps falling with refinement) at mesh size factor `MESH_SIZE_FACTOR`.
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 from ..core.errors import GeometryError
 from .fusiform import FLOOR_RISE
 from .geometry import FINEST_FACTOR, GeometrySpec
-from .solver import DEGREES
+from .solver import DEGREES, SolverSettings
 from .sutures import BODY_SITES, CaseError, ItchLoad, SuturePlan
 
 __all__ = ["DEPTH_INTO_SUBCUTIS", "MARGIN_PER_LENGTH", "MESH_SIZE_FACTOR", "ClinicalCase"]
@@ -29,7 +29,7 @@ DEPTH_INTO_SUBCUTIS = 0.25
 MARGIN_PER_LENGTH = 2.7
 # The element size 1.41 of the reference away from a trench's floor ((0.5 / 0.18)^(1/3)).
 MESH_SIZE_FACTOR = 0.18
-ELEMENT_DEGREE = 2
+ELEMENT_DEGREE = SolverSettings.element_degree
 SKIN_TYPES = ("normal", "stiff", "soft")
 # The closure zone may reach at most this fraction of the wound's depth (the walls are at
 # least 1 - FLOOR_RISE of it high).

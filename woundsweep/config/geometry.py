@@ -20,12 +20,15 @@ z >= -zone_depth_fraction * d is meshed as its own faces (`woundsweep.mesh.build
 
 from __future__ import annotations
 
+import hashlib
+import json
 import math
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass
 from typing import Any
 
 from ..core.errors import GeometryError
+from ..core.versions import MESH_LAW_VERSION
 from .fusiform import FLOOR_RISE, Lens, lens
 from .paper import ClosureZone
 from .solver import DEGREES, SolverSettings
@@ -77,8 +80,10 @@ class GeometrySpec:
         wound_width_mm: float,
         wound_aspect_factor: float,
         mesh_size_factor: float,
+        **settings: Any,
     ) -> GeometrySpec:
-        """A cylindrical wound; the depth follows from the width and the aspect factor."""
+        """A cylindrical wound; the depth follows from the width and the aspect factor;
+        ``settings``: the zone fractions and the element degree."""
         w, a = float(wound_width_mm), float(wound_aspect_factor)
         depth = math.hypot(w / 2, a * w) - a * w
         return cls(
@@ -90,6 +95,7 @@ class GeometrySpec:
             depth,
             a,
             mesh_size_factor,
+            **settings,
         )
 
     @classmethod
@@ -101,8 +107,10 @@ class GeometrySpec:
         wound_width_mm: float,
         wound_depth_mm: float,
         mesh_size_factor: float,
+        **settings: Any,
     ) -> GeometrySpec:
-        """A wedge wound of the given width at the surface and apex depth."""
+        """A wedge wound of the given width at the surface and apex depth; ``settings``: the
+        zone fractions and the element degree."""
         return cls(
             "wedge",
             dermal_thickness_mm,
@@ -112,6 +120,7 @@ class GeometrySpec:
             wound_depth_mm,
             None,
             mesh_size_factor,
+            **settings,
         )
 
     @classmethod
@@ -232,6 +241,20 @@ class GeometrySpec:
         if d["wound_length_mm"] is None:
             del d["wound_length_mm"]
         return d
+
+    @property
+    def mesh_id(self) -> str:
+        """16 hex digits of the sha256 of everything that determines the mesh: these
+        parameters (mesh size factor, closure zone and element degree included) and
+        `MESH_LAW_VERSION`. It names the cached mesh files (`woundsweep.mesh.cache`)."""
+        params = {
+            k: float(v) if isinstance(v, (int, float)) and not isinstance(v, bool) else v
+            for k, v in self.to_dict().items()
+        }
+        blob = json.dumps(
+            {"spec": params, "mesh_law": MESH_LAW_VERSION}, sort_keys=True, separators=(",", ":")
+        )
+        return hashlib.sha256(blob.encode()).hexdigest()[:16]
 
     def describe(self) -> str:
         """One-line summary for messages."""

@@ -3,7 +3,7 @@
 `expand` turns a `Sweep` into the manifest's rows in a stable geometry-major order; job and
 geometry ids are content hashes of the parameters. `load_run` opens a run directory made by
 ``woundsweep generate``; `Run.job` and `Run.geometry` give one job's manifest row and mesh
-parameters.
+parameters (`job_geometry`; their `GeometrySpec.mesh_id` names the job's mesh files).
 """
 
 from __future__ import annotations
@@ -21,6 +21,7 @@ import numpy as np
 import pandas as pd
 
 from ..core.errors import GeometryError, StoreError, SweepError
+from ..core.layout import RunLayout
 from .geometry import GeometrySpec
 from .rules import compile_rule, evaluate_rule
 from .sweep import (
@@ -43,6 +44,7 @@ __all__ = [
     "canonical_hash",
     "count_jobs",
     "expand",
+    "job_geometry",
     "load_run",
     "manifest_problem",
 ]
@@ -113,11 +115,17 @@ def count_jobs(sweep: Sweep) -> int:
     )
 
 
+def job_geometry(sweep: Sweep, row: JobRow | Mapping[str, Any]) -> GeometrySpec:
+    """The `GeometrySpec` of a manifest row with the sweep's closure zone and element degree
+    (both part of the mesh); GeometryError names the job."""
+    return GeometrySpec.from_row(row, sweep.stages.closure_zone, sweep.solver.element_degree)
+
+
 def _check_geometries(sweep: Sweep, df: pd.DataFrame) -> None:
     """Every geometry must be buildable (`GeometrySpec`), so no job fails on its ranges later."""
     for row in df.drop_duplicates(list(GEOMETRY_KEYS)).to_dict("records"):
         try:
-            GeometrySpec.from_row(row, sweep.stages.closure_zone, sweep.solver.element_degree)
+            job_geometry(sweep, row)
         except GeometryError as err:
             where = ", ".join(
                 f"{k}={row[k]:g}" if isinstance(row[k], float) else f"{k}={row[k]}"
@@ -186,6 +194,11 @@ class Run(NamedTuple):
     sweep: Sweep
     manifest: pd.DataFrame
 
+    @property
+    def layout(self) -> RunLayout:
+        """The run directory's paths."""
+        return RunLayout(self.run_dir)
+
     def job(self, job_index: int) -> JobRow:
         """The manifest row of ``job_index`` as a dict of plain values (StoreError if none)."""
         hit = self.manifest[self.manifest["job_index"] == int(job_index)]
@@ -195,11 +208,8 @@ class Run(NamedTuple):
         return row  # type: ignore[return-value]
 
     def geometry(self, row: JobRow | Mapping[str, Any]) -> GeometrySpec:
-        """The `GeometrySpec` of a manifest row with the sweep's closure zone and element
-        degree (both part of the mesh); GeometryError names the job."""
-        return GeometrySpec.from_row(
-            row, self.sweep.stages.closure_zone, self.sweep.solver.element_degree
-        )
+        """`job_geometry` of a manifest row with the run's sweep."""
+        return job_geometry(self.sweep, row)
 
 
 # Manifest columns of the fusiform excision (NaN for the trenches).
@@ -213,7 +223,8 @@ def load_run(run_dir: str | Path, job: int | None = None) -> Run:
     process: its runner checked every row; hashing all 11,664 rows of the paper grid costs a
     short job a tenth of its CPU time); every other check covers the whole manifest."""
     rd = Path(run_dir)
-    manifest_path, sweep_path = rd / "manifest.parquet", rd / "sweep.yaml"
+    layout = RunLayout(rd)
+    manifest_path, sweep_path = layout.manifest, layout.sweep
     if not manifest_path.is_file() or not sweep_path.is_file():
         raise StoreError(
             f"{rd}: not a run directory (run `woundsweep generate SWEEP.yaml --out {rd}`)"

@@ -50,7 +50,8 @@ def compile_rule(path: str, key: str, rule: str, names: Collection[str]) -> ast.
         if isinstance(node, ast.Constant) and not isinstance(node.value, (int, float, str)):
             raise SweepError(path, key, f"unsupported constant {node.value!r} in rule {rule!r}")
         if isinstance(node, ast.Constant) and not isinstance(node.value, str):
-            if not _finite(node.value):  # 10**400 would overflow NumPy, 1e999 is infinity
+            # An int or float (checked above); 10**400 would overflow NumPy, 1e999 is infinity.
+            if not _finite(node.value):  # type: ignore[arg-type]
                 raise SweepError(path, key, f"number out of range in rule {_short(rule)}")
     try:
         kind = _kind(tree.body)
@@ -87,8 +88,8 @@ def _kind(node: ast.AST) -> str:
         k = _kind(node.operand)
         want = "bool" if isinstance(node.op, ast.Not) else "num"
         if k != want:
-            op = "not" if want == "bool" else "unary -"
-            raise TypeError(f"{op} takes {_KIND_NAMES[want]}, got {_KIND_NAMES[k]}")
+            what = "not" if want == "bool" else "unary -"
+            raise TypeError(f"{what} takes {_KIND_NAMES[want]}, got {_KIND_NAMES[k]}")
         return want
     if isinstance(node, ast.BinOp):
         kinds = (_kind(node.left), _kind(node.right))
@@ -97,8 +98,8 @@ def _kind(node: ast.AST) -> str:
             raise TypeError(f"arithmetic takes numbers, got {_KIND_NAMES[bad]}")
         return "num"
     if isinstance(node, ast.BoolOp):
-        for v in node.values:
-            k = _kind(v)
+        for value in node.values:
+            k = _kind(value)
             if k != "bool":
                 raise TypeError(f"and/or take conditions, got {_KIND_NAMES[k]}")
         return "bool"
@@ -126,7 +127,7 @@ def evaluate_rule(node: ast.AST, df: pd.DataFrame) -> Any:
     if isinstance(node, ast.BoolOp):
         vals = [np.asarray(evaluate_rule(v, df), dtype=bool) for v in node.values]
         op = np.logical_and if isinstance(node.op, ast.And) else np.logical_or
-        out = vals[0]
+        out: Any = vals[0]
         for v in vals[1:]:
             out = op(out, v)
         return out
@@ -135,18 +136,19 @@ def evaluate_rule(node: ast.AST, df: pd.DataFrame) -> Any:
         return np.logical_not(v) if isinstance(node.op, ast.Not) else -v
     if isinstance(node, ast.BinOp):
         a, b = evaluate_rule(node.left, df), evaluate_rule(node.right, df)
-        return {ast.Add: np.add, ast.Sub: np.subtract, ast.Mult: np.multiply, ast.Div: np.divide}[
+        # The ufuncs' stub types differ, so mypy joins the dict's values to object.
+        return {ast.Add: np.add, ast.Sub: np.subtract, ast.Mult: np.multiply, ast.Div: np.divide}[  # type: ignore[operator]
             type(node.op)
         ](a, b)
     if isinstance(node, ast.Compare):
-        ops = {
+        ops: dict[type[ast.cmpop], Any] = {
             ast.Lt: np.less, ast.LtE: np.less_equal, ast.Gt: np.greater, ast.GtE: np.greater_equal,
             ast.Eq: np.equal, ast.NotEq: np.not_equal,
         }  # fmt: skip
         left, out = evaluate_rule(node.left, df), None
-        for op, comp in zip(node.ops, node.comparators):
+        for cmp, comp in zip(node.ops, node.comparators):
             right = evaluate_rule(comp, df)
-            res = np.asarray(ops[type(op)](left, right), dtype=bool)
+            res = np.asarray(ops[type(cmp)](left, right), dtype=bool)
             out = res if out is None else np.logical_and(out, res)
             left = right
         return out

@@ -1,7 +1,8 @@
 """Contact of the closed wound's flanks (stages 4-6).
 
 `ContactModel` is what the wound model needs from a formulation; `FlankContact` is the
-two-pass penalty on the flanks' smooth implicit surfaces (`woundsweep.contact.smooth`);
+two-pass penalty on the flanks' smooth implicit surfaces (`woundsweep.contact.smooth`), whose
+tangent's sparsity `CouplingPlan` plans (`woundsweep.contact.pattern`);
 `ContactMultipliers` carries its multipliers through Newton (the semi-smooth contact step,
 `woundsweep.contact.multipliers`); `ZoneTie` holds the closure zone's flanks together (the sutures)
 (`woundsweep.contact.tie`).
@@ -9,7 +10,8 @@ two-pass penalty on the flanks' smooth implicit surfaces (`woundsweep.contact.sm
 
 from .geometry import orient_outward, owning_cells, split_wound_flanks
 from .multipliers import ContactMultipliers
-from .protocol import GPA_TO_KPA, ContactModel, ContactSummary
+from .pattern import CouplingPlan
+from .protocol import GPA_TO_KPA, ContactModel, ContactSummary, Linearization
 from .smooth import FlankContact
 from .tie import ZoneTie
 
@@ -18,7 +20,9 @@ __all__ = [
     "ContactModel",
     "ContactMultipliers",
     "ContactSummary",
+    "CouplingPlan",
     "FlankContact",
+    "Linearization",
     "ZoneTie",
     "orient_outward",
     "owning_cells",

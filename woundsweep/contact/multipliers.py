@@ -24,11 +24,9 @@ from collections.abc import Callable
 
 import numpy as np
 
-from .protocol import ContactModel
+from .protocol import ContactModel, Linearization
 
 __all__ = ["ContactMultipliers"]
-
-Prediction = tuple[np.ndarray, np.ndarray]
 
 
 class ContactMultipliers:
@@ -62,14 +60,14 @@ class ContactMultipliers:
             else c.penalty_multipliers(self.solution())
         )
 
-    def predict(self, du: np.ndarray) -> Prediction | None:
-        """At the current state: (a, b) with the multipliers after u += gamma du
-        min(0, a + gamma b)."""
+    def predict(self, du: np.ndarray) -> Linearization | None:
+        """At the current state: the multipliers after u += gamma du are
+        min(0, forces + gamma rate)."""
         return self.contact.linearization(self.solution(), du) if self._on() else None
 
-    def accept(self, pred: Prediction | None, gamma: float) -> None:
+    def accept(self, pred: Linearization | None, gamma: float) -> None:
         if pred is not None:
-            self.contact.mult = np.minimum(pred[0] + gamma * pred[1], 0.0)
+            self.contact.mult = np.minimum(pred.forces + gamma * pred.rate, 0.0)
 
     def snapshot(self) -> np.ndarray | None:
         m = self.contact.mult

@@ -10,7 +10,7 @@ from typing import Any, NamedTuple, Protocol
 
 import numpy as np
 
-__all__ = ["GPA_TO_KPA", "ContactModel", "ContactSummary"]
+__all__ = ["GPA_TO_KPA", "ContactModel", "ContactSummary", "Linearization"]
 
 GPA_TO_KPA = 1.0e6  # stiffness in GPa -> kPa
 
@@ -22,6 +22,15 @@ class ContactSummary(NamedTuple):
     max_penetration_mm: float  # max -g (0 if none)
     max_penetration_rel: float  # max -g / h_s
     contact_force_mN: float  # total normal contact force, sum of c (-g)
+
+
+class Linearization(NamedTuple):
+    """The contact points' forces at a state and their rate along a step du (mN, 0 where
+    not engaged at the state): the Newton model's forces at u + gamma du are
+    min(0, forces + gamma rate)."""
+
+    forces: np.ndarray  # (n_points,) c psi(u)
+    rate: np.ndarray  # (n_points,) c dpsi . du
 
 
 class ContactModel(Protocol):
@@ -42,7 +51,11 @@ class ContactModel(Protocol):
     detect_time_s: float  # cumulative, since `reset_timers`
     assembly_time_s: float
     searches: int
-    pattern_version: int  # changes with the coupling pattern (planned, grown or cleared)
+
+    @property
+    def pattern_version(self) -> int:
+        """Changes with the coupling pattern (planned, grown or cleared); read-only."""
+        ...
 
     def energy(self, u: np.ndarray) -> float:
         """Penalty energy (mN mm) at ``u``."""
@@ -73,7 +86,7 @@ class ContactModel(Protocol):
         """mu = c psi(u) of every contact point (0 where not engaged)."""
         ...
 
-    def linearization(self, u0: np.ndarray, du: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def linearization(self, u0: np.ndarray, du: np.ndarray) -> Linearization:
         """(c psi(u0), c dpsi . du) of every contact point (0 where not engaged at u0)."""
         ...
 

@@ -24,48 +24,40 @@ A point sees the master facets whose centroid lies within their kernel radius (a
 query at every new state, cheap: the kernel vanishes with two derivatives at its radius, so
 the set can change without a jump). Evaluations are cached by the flank node positions.
 
-Coupling pattern (`ContactModel`): the tangent of an engaged point couples its node with the
-nodes of all its facets, so the pattern is that clique per point over its planned facets. A
-plan at a state takes the points that are engaged there or nearly so (g <= ``pattern_gap``
-h, or a compressive multiplier), each with the facets within (1 + ``pattern_margin``) kernel
-radii; most points of a flank never touch, and leaving them out keeps the explicit zeros, and
-so the factorisation, small. A tangent with an engaged pair outside the plan adds a plan at
-its state to the old one before it is returned.
+The coupling pattern (`ContactModel`) is planned by `woundsweep.contact.pattern`.
 """
 
 from __future__ import annotations
 
 import time
-from typing import Any, NamedTuple
+from typing import Any, NamedTuple, cast
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from .implicit import pair_terms, support_step
-from .protocol import ContactSummary
-from .surfaces import lumped_area, surface, triangle_areas
+from .pattern import PATTERN_GAP, PATTERN_MARGIN, CouplingPlan
+from .protocol import ContactSummary, Linearization
+from .surfaces import FlankPass, lumped_area, near_pairs, surface, triangle_areas
 
-__all__ = ["PATTERN_GAP", "PATTERN_MARGIN", "TWO_PASS_WEIGHT", "FlankContact"]
+__all__ = ["TWO_PASS_WEIGHT", "FlankContact"]
 
 TWO_PASS_WEIGHT = 0.5  # each flank is slave once and master once
-# Margins of the coupling pattern (module docstring): the gap, in element sizes h, below
-# which a point is planned, and the extra kernel radius of its facets. Wide enough that a
-# contact stage rarely leaves the plan (each growth costs MUMPS a new analysis; paper job
-# 7369 grows twice in stage 4's 35 steps), narrow enough that its explicit zeros add little
-# to the factorisation (the plan at the start of stage 4 has 4-6 % more entries than the
-# finite-element pattern with every tangent of stages 4-6, jobs 6367 and 7369).
-PATTERN_GAP, PATTERN_MARGIN = 0.1, 0.1
 
 
-class _Pass(NamedTuple):
-    """One pass: the slave flank's contact points against the master flank's facets."""
+class _PassState(NamedTuple):
+    """Gaps and derivatives of one pass's points at one state (`FlankContact._evaluate_pass`)."""
 
-    nodes: np.ndarray  # (nq,) slave nodes
-    area_mm2: np.ndarray  # (nq,) reference area per point
-    size_mm: np.ndarray  # (nq,) h per point
-    facets: np.ndarray  # (nf, 3) master facets, outward
-    rho_mm: np.ndarray  # (nf,) kernel radius per master facet
-    support_mm2: np.ndarray  # (nq,) D_full of each point: pi rho^2 / 4 at its own size
+    gap_all: np.ndarray  # (nq,) gap of every point (+inf where no master is near)
+    weight_all: np.ndarray  # (nq,) s^2 w A / h per point
+    gap: np.ndarray  # (na,) psi = s g of the engaged points
+    weight: np.ndarray  # (na,) w A / h of the engaged points
+    dofs: np.ndarray  # (na, L) local dofs (padded with 0)
+    grad: np.ndarray  # (na, L) dpsi in local dofs
+    hess: np.ndarray | None  # (na, L, L) d2psi
+    # A field named like tuple.index (shadows the method, which is never called on it).
+    index: np.ndarray  # type: ignore[assignment]  # (na,) engaged points' indices in the pass
+    support_all: np.ndarray  # (nq,) every point's support step at this state (not held)
+    in_plan: bool  # every pair of the tangent is in the coupling plan (or none is planned)
 
 
 class _State(NamedTuple):
@@ -80,7 +72,8 @@ class _State(NamedTuple):
     dofs: np.ndarray  # (na, L) local dofs (padded with 0)
     grad: np.ndarray  # (na, L) dpsi in local dofs (0 in padding)
     hess: np.ndarray | None  # (na, L, L) d2psi
-    index: np.ndarray  # (na,) engaged points' indices in the all-points numbering
+    # A field named like tuple.index (shadows the method, which is never called on it).
+    index: np.ndarray  # type: ignore[assignment]  # (na,) indices in the all-points numbering
     support_all: np.ndarray  # (nq_total,) every point's support step at this state (not held)
 
 
@@ -90,8 +83,9 @@ class FlankContact:
     ``X`` (n, 3) reference node coordinates; ``left`` and ``right`` (k, 3) outward-oriented
     facets in node numbering. ``k_V_kPa`` (attribute) is the penalty; 0 switches the contact
     terms off (gaps and penetrations are still measured). ``pattern_gap`` and
-    ``pattern_margin``: those of the coupling pattern (module docstring). ``tied`` nodes are
-    held by another law (the closure zone's tie) and are masters only, not contact points.
+    ``pattern_margin``: those of the coupling pattern (`woundsweep.contact.pattern`). ``tied``
+    nodes are held by another law (the closure zone's tie) and are masters only, not contact
+    points.
     """
 
     def __init__(
@@ -121,7 +115,7 @@ class FlankContact:
             rho = radius_factor * np.sqrt(4.0 * m_area / np.sqrt(3.0))
             size = sl.size_mm[keep]
             passes.append(
-                _Pass(sl.nodes[keep], lumped_area(self.X, sl.facets, sl.nodes[keep]), size,
+                FlankPass(sl.nodes[keep], lumped_area(self.X, sl.facets, sl.nodes[keep]), size,
                       ms.facets, rho, np.pi * (radius_factor * size) ** 2 / 4.0)
             )  # fmt: skip
         self.passes = tuple(passes)
@@ -138,13 +132,9 @@ class FlankContact:
         # The support step of every point frozen at a state (`freeze_support`), or None: s
         # follows the state.
         self._frozen: np.ndarray | None = None
-        # Coupling pattern: per pass the sorted keys q * n_facets + f of the planned pairs.
-        self.pattern_gap = float(pattern_gap)
-        self.pattern_margin = float(pattern_margin)
-        self._planned: list[np.ndarray] | None = None
-        self._pattern: Any = None  # coupling_pattern(), built on demand
-        self._outside = False  # a tangent evaluation met an engaged pair outside the plan
-        self.pattern_version = 0
+        self.plan = CouplingPlan(
+            self.passes, self._offsets, len(self.X), pattern_gap, pattern_margin
+        )
         self.reset_timers()
 
     def positions(self, u: np.ndarray) -> np.ndarray:
@@ -153,35 +143,15 @@ class FlankContact:
 
     # -- evaluation ---------------------------------------------------------------------------
 
-    @staticmethod
-    def _near(x: np.ndarray, ps: _Pass, scale: float) -> tuple[np.ndarray, np.ndarray]:
-        """(point, facet) index pairs, ordered by point then facet, with the point closer than
-        ``scale`` kernel radii to the facet's centroid."""
-        if len(ps.nodes) == 0 or len(ps.facets) == 0:
-            return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
-        cen = x[ps.facets].mean(axis=1)
-        xq = x[ps.nodes]
-        r = scale * ps.rho_mm
-        found = cKDTree(xq).sparse_distance_matrix(
-            cKDTree(cen), max_distance=float(r.max()), output_type="ndarray"
-        )
-        q = found["i"].astype(np.int64)
-        f = found["j"].astype(np.int64)
-        order = np.argsort(q * len(ps.facets) + f)  # the tree gives them in no set order
-        q, f = q[order], f[order]
-        d2 = np.sum((xq[q] - cen[f]) ** 2, axis=1)
-        near = d2 < r[f] ** 2
-        return q[near], f[near]
-
-    def _pairs(self, x: np.ndarray, ps: _Pass) -> tuple[np.ndarray, np.ndarray]:
+    def _pairs(self, x: np.ndarray, ps: FlankPass) -> tuple[np.ndarray, np.ndarray]:
         """(point, facet) index pairs with the point inside the facet's kernel radius."""
         t0 = time.perf_counter()
-        q, f = self._near(x, ps, 1.0)
+        q, f = near_pairs(x, ps, 1.0)
         self.detect_time_s += time.perf_counter() - t0
         self.searches += 1
         return q, f
 
-    def _evaluate_pass(self, x: np.ndarray, i: int, hessian: bool) -> tuple[Any, ...]:
+    def _evaluate_pass(self, x: np.ndarray, i: int, hessian: bool) -> _PassState:
         ps, off = self.passes[i], self._offsets[i]
         q, f = self._pairs(x, ps)
         nq = len(ps.nodes)
@@ -209,17 +179,12 @@ class FlankContact:
         act_pt = np.flatnonzero(engaged & (s_w > 0.0) & np.isfinite(gap))
         keep = np.isin(q, act_pt)
         q, f, mf = q[keep], f[keep], mf[keep]
-        if hessian and self._planned is not None:  # every pair of the tangent in the plan?
-            plan = self._planned[i]
-            key = q * len(ps.facets) + f
-            at = np.searchsorted(plan, key)
-            inside = at < len(plan)
-            inside[inside] = plan[at[inside]] == key[inside]
-            self._outside |= not inside.all()
+        in_plan = not hessian or self.plan.covers(i, q, f)
         if hessian:  # second derivatives only for the engaged points' pairs
             t = pair_terms(x[ps.nodes[q]], x[mf[:, 0]], x[mf[:, 1]], x[mf[:, 2]], ps.rho_mm[f])
         else:
-            t = type(t)(*(None if a is None else a[keep] for a in t))
+            # Each field filtered, None where it is None (only d2N and d2D can be).
+            t = type(t)(*(None if a is None else a[keep] for a in t))  # type: ignore[arg-type]
         rank = np.full(nq, -1, dtype=np.int64)
         rank[act_pt] = np.arange(len(act_pt))
         qa = rank[q]
@@ -252,6 +217,7 @@ class FlankContact:
         grad = sw[:, None] * dphi + (s1 * g)[:, None] * dt
         hess = None
         if hessian:
+            assert t.d2N is not None and t.d2D is not None  # pair_terms with second derivatives
             r_i = np.repeat(ldof, 12, axis=1).ravel()
             c_i = np.tile(ldof, (1, 12)).ravel()
             p_i = np.repeat(qa, 144)
@@ -274,7 +240,18 @@ class FlankContact:
             )
         dofs = (3 * node_of[:, :, None] + np.arange(3)).reshape(na, 3 * L)
         weight = TWO_PASS_WEIGHT * ps.area_mm2 / ps.size_mm
-        return gap, weight * s_w**2, psi, weight[act_pt], dofs, grad, hess, act_pt, s_live
+        return _PassState(
+            gap_all=gap,
+            weight_all=weight * s_w**2,
+            gap=psi,
+            weight=weight[act_pt],
+            dofs=dofs,
+            grad=grad,
+            hess=hess,
+            index=act_pt,
+            support_all=s_live,
+            in_plan=in_plan,
+        )
 
     def _state(self, u: np.ndarray, hessian: bool) -> _State:
         """Gaps and derivatives at ``u`` (cached by the flank node positions; a state with the
@@ -288,95 +265,80 @@ class FlankContact:
             if key in self._cache:
                 return self._cache[key]
         t0 = time.perf_counter()
-        self._outside = False
         parts = [self._evaluate_pass(x, i, hessian) for i in range(len(self.passes))]
-        if self._outside:
-            self._grow(x, np.concatenate([p[0] for p in parts]))
-        L = max(p[4].shape[1] for p in parts)
+        if not all(p.in_plan for p in parts):  # grown before the tangent is returned
+            self.plan.grow(x, np.concatenate([p.gap_all for p in parts]), self._mult)
+        L = max(p.dofs.shape[1] for p in parts)
 
         def pad(a: np.ndarray, square: bool) -> np.ndarray:
             w = L - a.shape[1]
             return np.pad(a, [(0, 0), (0, w)] + ([(0, w)] if square else []))
 
         st = _State(
-            np.concatenate([p[0] for p in parts]),
-            np.concatenate([p[1] for p in parts]),
-            np.concatenate([ps.size_mm for ps in self.passes]),
-            np.concatenate([TWO_PASS_WEIGHT * ps.area_mm2 / ps.size_mm for ps in self.passes]),
-            np.concatenate([p[2] for p in parts]),
-            np.concatenate([p[3] for p in parts]),
-            np.concatenate([pad(p[4], False) for p in parts]),
-            np.concatenate([pad(p[5], False) for p in parts]),
-            np.concatenate([pad(p[6], True) for p in parts]) if hessian else None,
-            np.concatenate([p[7] + off for p, off in zip(parts, self._offsets)]),
-            np.concatenate([p[8] for p in parts]),
+            gap_all=np.concatenate([p.gap_all for p in parts]),
+            weight_all=np.concatenate([p.weight_all for p in parts]),
+            size_all=np.concatenate([ps.size_mm for ps in self.passes]),
+            full_weight=np.concatenate(
+                [TWO_PASS_WEIGHT * ps.area_mm2 / ps.size_mm for ps in self.passes]
+            ),
+            gap=np.concatenate([p.gap for p in parts]),
+            weight=np.concatenate([p.weight for p in parts]),
+            dofs=np.concatenate([pad(p.dofs, False) for p in parts]),
+            grad=np.concatenate([pad(p.grad, False) for p in parts]),
+            hess=np.concatenate([pad(cast(np.ndarray, p.hess), True) for p in parts])
+            if hessian
+            else None,
+            index=np.concatenate([p.index + off for p, off in zip(parts, self._offsets)]),
+            support_all=np.concatenate([p.support_all for p in parts]),
         )
         self._cache[hessian] = st
         self.evaluations += 1
         self.assembly_time_s += time.perf_counter() - t0
         return st
 
-    # -- coupling pattern -----------------------------------------------------------------------
-
-    def _plan(self, x: np.ndarray, gap: np.ndarray) -> list[np.ndarray]:
-        """Planned pairs (keys) at positions ``x`` with gaps ``gap`` (module docstring)."""
-        size = np.concatenate([ps.size_mm for ps in self.passes])
-        near = gap <= self.pattern_gap * size
-        if self._mult is not None:
-            near |= self._mult < 0.0
-        keys = []
-        for ps, off in zip(self.passes, self._offsets):
-            q, f = self._near(x, ps, 1.0 + self.pattern_margin)
-            keep = near[off + q]
-            keys.append(q[keep] * len(ps.facets) + f[keep])
-        return keys
+    # -- coupling pattern (`woundsweep.contact.pattern`) ----------------------------------------
 
     def plan_pattern(self, u: np.ndarray) -> None:
-        """Set the coupling pattern to that of a plan at ``u`` (module docstring)."""
+        """Set the coupling pattern to that of a plan at ``u``."""
         gap = self._state(u, hessian=False).gap_all
-        self._planned = self._plan(self.positions(u), gap)
-        self._pattern = None
-        self.pattern_version += 1
-
-    def _grow(self, x: np.ndarray, gap: np.ndarray) -> None:
-        """Add a plan at positions ``x`` (gaps ``gap``) to the planned pairs."""
-        assert self._planned is not None
-        new = self._plan(x, gap)
-        self._planned = [np.union1d(a, b) for a, b in zip(self._planned, new)]
-        self._pattern = None
-        self.pattern_version += 1
-        self.pattern_growths += 1
+        self.plan.set(self.positions(u), gap, self._mult)
 
     def clear_pattern(self) -> None:
         """Drop the coupling pattern (tangents are no longer checked against it)."""
-        self._planned = None
-        self._pattern = None
-        self.pattern_version += 1
+        self.plan.clear()
 
     def coupling_pattern(self) -> Any:
         """Structure (scipy CSR of ones, n_dofs square) of every tangent entry the planned
-        pairs allow: per point, its node and its planned facets' nodes coupled pairwise with
-        all three components; None if no pattern is planned."""
-        import scipy.sparse
+        pairs allow; None if no pattern is planned."""
+        return self.plan.structure()
 
-        if self._planned is None:
-            return None
-        if self._pattern is None:
-            pts, nodes = [], []
-            for ps, off, keys in zip(self.passes, self._offsets, self._planned):
-                q, f = np.divmod(keys, max(len(ps.facets), 1))
-                pts.append(np.repeat(off + q, 4))
-                nodes.append(np.concatenate([ps.nodes[q][:, None], ps.facets[f]], axis=1).ravel())
-            rows, cols = np.concatenate(pts), np.concatenate(nodes)
-            shape = (self.n_points, len(self.X))
-            B = scipy.sparse.csr_matrix((np.ones(len(rows)), (rows, cols)), shape=shape)
-            B.data[:] = 1.0
-            G = (B.T @ B).tocsr()  # nodes that share a point
-            G.data[:] = 1.0
-            P = scipy.sparse.kron(G, np.ones((3, 3)), format="csr")
-            P.sort_indices()
-            self._pattern = P
-        return self._pattern
+    @property
+    def pattern_version(self) -> int:
+        """Changes with the coupling pattern (planned, grown or cleared)."""
+        return self.plan.version
+
+    @property
+    def pattern_growths(self) -> int:
+        """Growths of the coupling pattern since `reset_timers`."""
+        return self.plan.growths
+
+    @property
+    def pattern_gap(self) -> float:
+        """The plan's gap margin, in element sizes."""
+        return self.plan.gap
+
+    @pattern_gap.setter
+    def pattern_gap(self, value: float) -> None:
+        self.plan.gap = float(value)
+
+    @property
+    def pattern_margin(self) -> float:
+        """The plan's extra kernel radius of a point's facets."""
+        return self.plan.margin
+
+    @pattern_margin.setter
+    def pattern_margin(self, value: float) -> None:
+        self.plan.margin = float(value)
 
     # -- energy, forces, tangent ----------------------------------------------------------------
 
@@ -453,13 +415,13 @@ class FlankContact:
         out[st.index] = self.k_V_kPa * st.weight * st.gap
         return out
 
-    def linearization(self, u0: np.ndarray, du: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def linearization(self, u0: np.ndarray, du: np.ndarray) -> Linearization:
         """(c psi(u0), c dpsi . du) of every point (0 where not engaged at u0): the forces
         the Newton model predicts at u0 + gamma du are min(0, a + gamma b)."""
         st = self._state(u0, hessian=False)
         b = np.zeros(self.n_points)
         b[st.index] = self.k_V_kPa * st.weight * np.sum(st.grad * du[st.dofs], axis=1)
-        return self.penalty_multipliers(u0), b
+        return Linearization(self.penalty_multipliers(u0), b)
 
     # -- reporting ------------------------------------------------------------------------------
 
@@ -490,4 +452,4 @@ class FlankContact:
         self.assembly_time_s = 0.0  # cumulative: gaps, residual and tangent contributions
         self.evaluations = 0
         self.searches = 0
-        self.pattern_growths = 0
+        self.plan.growths = 0

@@ -1,12 +1,14 @@
-"""Contact surfaces in node numbering, with the element size at their nodes (reference)."""
+"""Contact surfaces in node numbering, with the element size at their nodes (reference), and
+the passes of a two-pass contact with their point-facet neighbour search."""
 
 from __future__ import annotations
 
 from typing import NamedTuple
 
 import numpy as np
+from scipy.spatial import cKDTree
 
-__all__ = ["Surface", "lumped_area", "surface", "triangle_areas"]
+__all__ = ["FlankPass", "Surface", "lumped_area", "near_pairs", "surface", "triangle_areas"]
 
 
 class Surface(NamedTuple):
@@ -37,3 +39,34 @@ def lumped_area(X: np.ndarray, facets: np.ndarray, nodes: np.ndarray) -> np.ndar
     area = triangle_areas(X[facets])
     per_node = np.bincount(facets.ravel(), weights=np.repeat(area / 3.0, 3), minlength=len(X))
     return per_node[nodes]
+
+
+class FlankPass(NamedTuple):
+    """One pass: the slave flank's contact points against the master flank's facets."""
+
+    nodes: np.ndarray  # (nq,) slave nodes
+    area_mm2: np.ndarray  # (nq,) reference area per point
+    size_mm: np.ndarray  # (nq,) h per point
+    facets: np.ndarray  # (nf, 3) master facets, outward
+    rho_mm: np.ndarray  # (nf,) kernel radius per master facet
+    support_mm2: np.ndarray  # (nq,) D_full of each point: pi rho^2 / 4 at its own size
+
+
+def near_pairs(x: np.ndarray, ps: FlankPass, scale: float) -> tuple[np.ndarray, np.ndarray]:
+    """(point, facet) index pairs of pass ``ps`` at positions ``x``, ordered by point then
+    facet, with the point closer than ``scale`` kernel radii to the facet's centroid."""
+    if len(ps.nodes) == 0 or len(ps.facets) == 0:
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    cen = x[ps.facets].mean(axis=1)
+    xq = x[ps.nodes]
+    r = scale * ps.rho_mm
+    found = cKDTree(xq).sparse_distance_matrix(
+        cKDTree(cen), max_distance=float(r.max()), output_type="ndarray"
+    )
+    q = found["i"].astype(np.int64)
+    f = found["j"].astype(np.int64)
+    order = np.argsort(q * len(ps.facets) + f)  # the tree gives them in no set order
+    q, f = q[order], f[order]
+    d2 = np.sum((xq[q] - cen[f]) ** 2, axis=1)
+    near = d2 < r[f] ** 2
+    return q[near], f[near]

@@ -1,22 +1,30 @@
-"""A stage's report: its `StageResult` and its diagnostics, with the one encoding that carries
-them from the solver (the solver file's ``stage_results``) to the store (the result rows'
-fields and ``stage_extra_json``) and the analysis.
+"""A stage's report: its `StageResult` and its diagnostics, carried from the solver (the
+solver file's ``stage_results``) to the store (one typed column per known diagnostic) and the
+analysis.
 
 Diagnostics are what a stage measures beside its result (docs/design.md, "Solver output");
 a key is present where the stage measures it, with null where the value is not a finite
-number. Keys a reader does not know are kept as they are.
+number. `StageDiagnostics` is the list of known diagnostics, each name carrying its unit; the
+store has one column per name (`DIAGNOSTIC_KINDS`: int for counts, float for the rest), null
+where a stage has none, and refuses a diagnostic it has no column for.
 """
 
 from __future__ import annotations
 
-import json
 import math
+import typing
 from collections.abc import Mapping
 from typing import Any, NamedTuple, TypedDict
 
 from .schema import StageResult, StageStatus
 
-__all__ = ["DIAGNOSTIC_KEYS", "StageDiagnostics", "StageReport", "parse_diagnostics"]
+__all__ = [
+    "DIAGNOSTIC_KEYS",
+    "DIAGNOSTIC_KINDS",
+    "StageDiagnostics",
+    "StageReport",
+    "diagnostic_columns",
+]
 
 
 class StageDiagnostics(TypedDict, total=False):
@@ -53,7 +61,16 @@ class StageDiagnostics(TypedDict, total=False):
     contact_line_load_max_at_mm: float | None
 
 
-DIAGNOSTIC_KEYS = frozenset(StageDiagnostics.__annotations__)
+def _kind(hint: Any) -> type:
+    return int if hint is int or int in typing.get_args(hint) else float
+
+
+# The known diagnostics in declaration order and their kind (int or float): the store's
+# diagnostic columns.
+DIAGNOSTIC_KINDS: dict[str, type] = {
+    name: _kind(hint) for name, hint in typing.get_type_hints(StageDiagnostics).items()
+}
+DIAGNOSTIC_KEYS = frozenset(DIAGNOSTIC_KINDS)
 
 
 def _number(v: Any) -> Any:
@@ -89,11 +106,29 @@ class StageReport(NamedTuple):
         extra = {k: v for k, v in row.items() if k not in fields}
         return cls(result, extra)  # type: ignore[arg-type]
 
-    def diagnostics_json(self) -> str | None:
-        """The store's ``stage_extra_json``: sorted keys, or None without diagnostics."""
-        return json.dumps(self.diagnostics, sort_keys=True) if self.diagnostics else None
+    def diagnostic_columns(self) -> dict[str, int | float | None]:
+        """The store's diagnostic columns of this stage (`diagnostic_columns`)."""
+        return diagnostic_columns(self.diagnostics)
 
 
-def parse_diagnostics(text: str | None) -> StageDiagnostics:
-    """The diagnostics of a stored ``stage_extra_json`` (empty for None or '')."""
-    return json.loads(text) if isinstance(text, str) and text else StageDiagnostics()
+def diagnostic_columns(diagnostics: Mapping[str, Any]) -> dict[str, int | float | None]:
+    """Every known diagnostic (`DIAGNOSTIC_KINDS` order) with its value as its kind, None
+    where ``diagnostics`` has none; ValueError for a name the store has no column for."""
+    unknown = sorted(set(diagnostics) - DIAGNOSTIC_KEYS)
+    if unknown:
+        raise ValueError(
+            f"diagnostics {unknown} have no store column (add them to core.diagnostics)"
+        )
+    out: dict[str, int | float | None] = {}
+    for name, kind in DIAGNOSTIC_KINDS.items():
+        v = diagnostics.get(name)
+        x = None if v is None else float(v)
+        if x is None or not math.isfinite(x):
+            out[name] = None
+        elif kind is float:
+            out[name] = x
+        elif x != int(x):
+            raise ValueError(f"diagnostic {name} = {v!r} is not a count")
+        else:
+            out[name] = int(v) if isinstance(v, int) else int(x)
+    return out

@@ -100,7 +100,7 @@ def _fire(spec: FaultSpec, job_index: int) -> None:
         )
         ctypes.string_at(0)
     elif spec.kind == "oom":
-        hoard = []
+        hoard: list[bytes] = []
         while len(hoard) * OOM_CHUNK_BYTES < OOM_CEILING_BYTES:
             hoard.append(b"\x01" * OOM_CHUNK_BYTES)  # touched pages: counts in RSS at once
             time.sleep(0.01)

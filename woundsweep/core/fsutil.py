@@ -25,8 +25,8 @@ def _umask() -> int:
     return mask
 
 
-def atomic_write(path: str | Path, write: Callable[[str], None]) -> None:
-    """Call ``write(tmp_path)``, fsync the result, then ``os.replace`` it onto ``path``.
+def atomic_write(path: str | Path, write: Callable[[str], object]) -> None:
+    """Call ``write(tmp_path)`` (its return value is ignored), fsync the result, then ``os.replace`` it onto ``path``.
 
     The temporary file sits in the same directory (same filesystem, so the rename is atomic)
     and starts with a dot, so dataset readers such as pyarrow ignore it.

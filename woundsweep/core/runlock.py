@@ -15,10 +15,9 @@ import os
 from pathlib import Path
 
 from .errors import StoreError
+from .layout import RunLayout
 
-__all__ = ["LOCK_NAME", "claim", "hold_run", "release"]
-
-LOCK_NAME = "run.lock"
+__all__ = ["claim", "hold_run", "release"]
 
 
 def _lock(path: Path, mode: int, create: bool) -> int | None:
@@ -43,7 +42,7 @@ def hold_run(run_dir: Path, *, exclusive: bool) -> int:
     """Lock ``RUN_DIR/run.lock`` (shared for a runner, exclusive for a rewrite of the run);
     returns the descriptor to `release`. StoreError when the other kind holds it."""
     mode = fcntl.LOCK_EX if exclusive else fcntl.LOCK_SH
-    fd = _lock(run_dir / LOCK_NAME, mode, create=True)
+    fd = _lock(RunLayout(run_dir).lock, mode, create=True)
     if fd is None:
         what = "a `woundsweep run` is in progress" if exclusive else "`generate` is rewriting it"
         raise StoreError(f"{run_dir}: {what} (try again when it has finished)")

@@ -1,7 +1,9 @@
-"""The definitions the layers share: mesh tags, stages, statuses, exit codes, result fields.
+"""The definitions the layers share: mesh tags and `MeshData`, stages, statuses, exit codes,
+result fields.
 
 Every other module imports these from here (docs/design.md, "Contracts"). Pure Python: no
-DOLFINx, no Arrow, so the command line, the store and the solver can all use it.
+DOLFINx, no Arrow (numpy only in annotations), so the command line, the store and the solver
+can all use it.
 """
 
 from __future__ import annotations
@@ -10,9 +12,12 @@ import enum
 import re
 import typing
 from types import MappingProxyType
-from typing import NamedTuple
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 from .errors import WoundsweepError
+
+if TYPE_CHECKING:
+    import numpy as np
 
 __all__ = [
     "PROFILE_LINES",
@@ -36,6 +41,7 @@ __all__ = [
     "Y_MIN",
     "ExitCode",
     "FailureClass",
+    "MeshData",
     "ResultState",
     "StageResult",
     "StageStatus",
@@ -72,6 +78,21 @@ FACET_TAGS = MappingProxyType(
     }
 )
 TAGS = MappingProxyType({**CELL_TAGS, **FACET_TAGS})
+
+
+class MeshData(NamedTuple):
+    """A first-order tetrahedral mesh: arrays in mm, tags as in ``CELL_TAGS``/``FACET_TAGS``.
+
+    ``info`` of a built mesh records, among others, the ``element_degree`` its edges were
+    sized for and its ``closure_zone`` (`woundsweep.mesh.build`)."""
+
+    points: np.ndarray  # (n, 3) float64, every node used by a cell, no duplicates
+    cells: np.ndarray  # (m, 4) int64, positively oriented
+    cell_tags: np.ndarray  # (m,) int32
+    facets: np.ndarray  # (k, 3) int64, each exterior triangle once
+    facet_tags: np.ndarray  # (k,) int32
+    info: dict[str, Any]
+
 
 STAGES = (1, 2, 3, 4, 5, 6)
 # Stage 4 restarts from stage 2's Dirichlet-closed state (docs/model.md, "The six stages"), so
@@ -181,6 +202,8 @@ class StageResult(NamedTuple):
     residual_norm: float | None = None
     dofs: int | None = None
     cells: int | None = None
+    # The job's displacement element (1: P1, 2: P2), from its solver settings.
+    element_degree: int | None = None
 
 
 def stage_field_kinds() -> dict[str, type]:

@@ -14,20 +14,22 @@ __all__ = [
     "SURROGATE_FORMAT",
 ]
 
-# The result file's columns, footer and fingerprint layout (`woundsweep.store.identity`).
-RESULT_FORMAT_VERSION = 4
+# The result file's columns (one typed column per stage diagnostic, the element degree),
+# footer and fingerprint layout (`woundsweep.store.identity`).
+RESULT_FORMAT_VERSION = 5
 # What the six stages solve (docs/model.md, "The six stages": their loads, the closure load of
 # stages 3-6, contact and its support held per solve, tie). Part of a result's fingerprint.
 STAGES_VERSION = 4
 # The geometry and the mesh size law (`woundsweep.mesh.sizing`, the closure zone imprinted on
-# the wound surface, edges scaled with the element degree). Cached meshes and results of
-# another version are rebuilt.
+# the wound surface, edges scaled with the element degree). Part of the mesh id that names
+# the cached meshes; cached meshes and results of another version are rebuilt.
 MESH_LAW_VERSION = 5
 # How the stored stress statistics are computed (docs/model.md, "Stress statistics": P2
 # cells sampled at a degree-4 rule's points). Part of a result's fingerprint.
 STATISTICS_VERSION = 2
-# The per-run mesh cache's file layout (`woundsweep.mesh.cache`).
-MESH_CACHE_FORMAT = 1
+# The per-run mesh cache's file layout (`woundsweep.mesh.cache`: files named by the mesh id,
+# the element degree recorded).
+MESH_CACHE_FORMAT = 2
 # The trained models' metadata (`woundsweep.analysis`).
 MODEL_FORMAT = "woundsweep-quantile-model/1"
 SURROGATE_FORMAT = "woundsweep-stress-surrogate/1"

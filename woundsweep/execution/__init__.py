@@ -1,6 +1,6 @@
 """Running jobs: the deterministic shards (`shards`), the runner of ``woundsweep run``
-(`runner`) with its processes (`process`), fork server (`forkserver`), failure classes
-(`classify`) and JIT-lock handling (`jitlock`), the progress summary of ``status``
+(`runner`) with its job plan (`planning`), processes (`process`), fork server (`forkserver`),
+failure classes (`classify`) and JIT-lock handling (`jitlock`), the progress summary of ``status``
 (`summary`), and SLURM batch scripts (`slurm`). Never imports DOLFINx: a job runs the job
 function (`woundsweep.physics.entry`) in a process of its own. Names are re-exported lazily."""
 

@@ -404,7 +404,8 @@ def serve(fd: int) -> None:
     try:
         _send(sock, {"ready": True, "pid": me, "preload_failed": failed})
         while True:
-            ready = select.select([sock, wake_r], [], [])[0]
+            # A socket and an fd, both FileDescriptorLike (mypy joins the list to object).
+            ready = select.select([sock, wake_r], [], [])[0]  # type: ignore[type-var]
             if wake_r in ready:
                 while True:
                     try:

@@ -17,6 +17,8 @@ that need a form being compiled wait on its lock for only 10 s (`woundsweep.exec
 So the runner starts with one job alone (the cheapest of the shard) and fans out to K workers
 once a job has been through the solver (converged or not), or after three tries. Jobs started
 while the cache may still be cold get ``warmup_extra_s`` more time.
+
+Which jobs run, and in which order, is planned by `woundsweep.execution.planning`.
 """
 
 from __future__ import annotations
@@ -25,26 +27,26 @@ import errno
 import os
 import signal
 import socket
-import sys
 import time
 from collections import deque
 from dataclasses import dataclass
 from pathlib import Path
+from types import FrameType
 from typing import Any, NamedTuple
 
-import pandas as pd
-
-from ..config.manifest import JobRow, load_run
-from ..core.errors import StoreError, WoundsweepError, one_line
+from ..config.manifest import JobRow, Run, load_run
+from ..core.errors import StoreError, WoundsweepError
 from ..core.faults import ATTEMPT_ENV
+from ..core.layout import RunLayout
 from ..core.runlock import claim, hold_run, release
 from ..core.schema import ExitCode, FailureClass, ResultState
-from ..store.writer import AttemptOutcome, Store
+from ..store import AttemptOutcome, Store
 from .classify import TRANSIENT_CLASSES, classify
 from .forkserver import ForkServer, JobRequest
 from .jitlock import break_lock, clear_stale_jit_locks, jit_cache_dir, lock_state
+from .planning import ShardPlan, mtime_ns, plan_shard
 from .process import Attempt, Job, kill_group, tree_rss
-from .shards import Shard, estimate_cost, shard_jobs
+from .shards import Shard
 
 __all__ = ["RunOptions", "RunSummary", "Terminated", "run_shard"]
 
@@ -174,7 +176,7 @@ class _Runner:
             job.next_claim_check = time.time() + 1.0
             return False
         self.claims[job.job_id] = fd
-        if _mtime_ns(self.store.result_path(job.job_id)) != job.seen_mtime_ns:
+        if mtime_ns(self.store.result_path(job.job_id)) != job.seen_mtime_ns:
             self.unclaim(job)
             return None
         return True
@@ -199,7 +201,7 @@ class _Runner:
         if os.WIFEXITED(status) and os.WEXITSTATUS(status) == ExitCode.SWEEP_CHANGED:
             att.out.unlink(missing_ok=True)
             raise StoreError(
-                f"{self.run_dir / 'sweep.yaml'} changed while this run was in progress (job "
+                f"{self.store.layout.sweep} changed while this run was in progress (job "
                 f"{job.index} refused it; nothing stored for it): rerun `woundsweep run` to go on "
                 "with the sweep there now"
             )
@@ -284,31 +286,29 @@ def _store(store: Store, row: JobRow, outcome: AttemptOutcome, opts: RunOptions)
     store.write_job(row, bad, opts.stages, opts.fields, str(opts.shard))
 
 
-def _order(jobs: pd.DataFrame, warmup: bool) -> list[dict[str, Any]]:
-    """Manifest order, except that the cheapest job goes first to warm the JIT cache."""
-    rows = jobs.to_dict("records")
-    if warmup and rows:
-        cost = estimate_cost(jobs)
-        first = int(cost.argmin())
-        rows.insert(0, rows.pop(first))
-    return rows
-
-
 class Terminated(WoundsweepError):
     """SIGTERM (e.g. a batch system's time limit): running jobs were killed, the store is whole."""
 
     exit_code = 143
 
 
-def _on_sigterm(signum: int, frame: Any) -> None:
+def _on_sigterm(signum: int, frame: FrameType | None) -> None:
     raise Terminated("terminated by SIGTERM: running jobs killed; rerun to resume")
 
 
-def _mtime_ns(path: Path) -> int | None:
-    try:
-        return path.stat().st_mtime_ns
-    except FileNotFoundError:
-        return None
+def _run_files(run_dir: Path) -> tuple[tuple[int, int, int] | None, ...]:
+    """Identity (inode, size, mtime; None if missing) of the run's sweep and manifest files:
+    `generate` replaces them by a rename, so a rewrite changes it."""
+    layout = RunLayout(run_dir)
+    out: list[tuple[int, int, int] | None] = []
+    for path in (layout.sweep, layout.manifest):
+        try:
+            st = path.stat()
+        except FileNotFoundError:
+            out.append(None)
+        else:
+            out.append((st.st_ino, st.st_size, st.st_mtime_ns))
+    return tuple(out)
 
 
 def run_shard(run_dir: str | Path, opts: RunOptions) -> RunSummary:
@@ -317,104 +317,123 @@ def run_shard(run_dir: str | Path, opts: RunOptions) -> RunSummary:
     The run directory is held (`core.runlock`) for the whole run, so its sweep cannot be
     rewritten meanwhile; each job is claimed before it starts, so runners of one shard share it.
     """
-    store = Store(load_run(run_dir).run_dir)
+    t0 = time.time()
+    seen = _run_files(Path(run_dir))
+    run = load_run(run_dir)  # checked before anything is made or locked in the directory
+    store = Store(run.run_dir)
     store.ensure_dirs()
     lock = hold_run(store.run_dir, exclusive=False)
     try:
-        return _run_held(store.run_dir, opts)
+        # Every result is stamped with the sweep as it is under the lock: read again only if
+        # `generate` rewrote the run before the lock was taken.
+        if _run_files(run.run_dir) != seen:
+            run = load_run(run.run_dir)
+        return _run_held(run, opts, t0)
     finally:
         release(lock)
 
 
-def _run_held(run_dir: Path, opts: RunOptions) -> RunSummary:
+class _Loop:
+    """The runner's loop: starts queued jobs up to the worker limit, stores finished ones."""
+
+    def __init__(self, runner: _Runner, plan: ShardPlan, bar: Any) -> None:
+        self.runner = runner
+        self.bar = bar
+        self.queue: deque[Job] = deque(plan.todo)
+        self.skipped = plan.skipped
+        self.failed = 0
+
+    def run(self) -> None:
+        r = self.runner
+        while self.queue or r.running:
+            self.start_ready()
+            finished = r.poll()
+            for att, status, usage in finished:
+                self.settle(att, status, usage)
+            if not finished:  # else start the next jobs at once
+                r.server.wait_any(r.opts.poll_s)
+
+    def start_ready(self) -> None:
+        """Start queued jobs up to the limit (one while warming up); a job that waits (on a
+        JIT lock or another runner's claim) goes to the back of the queue."""
+        r = self.runner
+        limit = 1 if r.warming else r.opts.workers
+        for _ in range(len(self.queue)):
+            if len(r.running) >= limit:
+                break
+            job = self.queue.popleft()
+            claimed = r.claim(job) if r.ready(job) else False
+            if claimed:
+                r.start(job)
+            elif claimed is None:  # stored by another runner of the shard meanwhile
+                self.skipped += 1
+                self.bar.update(1)
+            else:
+                self.queue.append(job)
+
+    def settle(self, att: Attempt, status: int, usage: Any) -> None:
+        """Store an ended attempt's outcome, or queue its job again for a retry."""
+        r = self.runner
+        outcome = r.finish(att, status, usage)
+        if outcome is None:
+            self.queue.append(att.job)
+            return
+        try:
+            _store(r.store, att.job.row, outcome, r.opts)
+        finally:
+            att.out.unlink(missing_ok=True)
+            r.unclaim(att.job)
+        r.by_class[outcome.failure_class] = r.by_class.get(outcome.failure_class, 0) + 1
+        if outcome.failure_class != FailureClass.CONVERGED:
+            self.failed += 1
+        self.bar.set_postfix(failed=self.failed, running=len(r.running), refresh=False)
+        self.bar.update(1)
+
+
+def _progress_bar(plan: ShardPlan, opts: RunOptions) -> Any:
     from tqdm import tqdm
 
-    t0 = time.time()
-    run = load_run(run_dir)  # again, under the lock: the sweep every result is stamped with
-    store = Store(run_dir, run.sweep)
-    store.clean_tmp()
-    clear_stale_jit_locks(jit_cache_dir(), opts.jit_stale_after_s)
-    shard = shard_jobs(run.manifest, opts.shard)
-    todo, skipped = [], 0
-    for row in _order(shard, opts.warmup):
-        jid = str(row["job_id"])
-        st = store.job_state(jid, opts.stages, store.fingerprint(row))
-        if st.state in (
-            ResultState.CORRUPT,
-            ResultState.DAMAGED,
-        ):  # damaged: its fields or mesh file go too
-            moved = store.quarantine(jid, files=st.state == ResultState.DAMAGED)
-            print(
-                one_line(f"woundsweep run: {st.reason}; moved to {moved}, rerunning"),
-                file=sys.stderr,
-            )
-        elif st.state == ResultState.DONE and not (
-            opts.rerun_failed and st.failure_class != FailureClass.CONVERGED
-        ):
-            skipped += 1
-            continue
-        todo.append(Job(row, seen_mtime_ns=_mtime_ns(store.result_path(jid))))
-
-    runner = _Runner(store, opts)
-    queue: deque[Job] = deque(todo)
-    failed = 0
     tqdm.monitor_interval = 0  # no monitor thread: the runner forks with preexec_fn
-    bar = tqdm(
-        total=len(shard),
-        initial=skipped,
+    return tqdm(
+        total=plan.jobs,
+        initial=plan.skipped,
         unit="job",
         desc=f"shard {opts.shard}",
         disable=None if opts.progress is None else not opts.progress,
         smoothing=0.1,
     )
+
+
+def _run_held(run: Run, opts: RunOptions, t0: float) -> RunSummary:
+    """`run_shard` with the run directory held; ``t0`` its start."""
+    store = Store(run.run_dir, run.sweep)
+    store.clean_tmp()
+    clear_stale_jit_locks(jit_cache_dir(), opts.jit_stale_after_s)
+    plan = plan_shard(
+        store,
+        run.manifest,
+        opts.shard,
+        stages=opts.stages,
+        rerun_failed=opts.rerun_failed,
+        warmup=opts.warmup,
+    )
+    runner = _Runner(store, opts)
+    loop = _Loop(runner, plan, _progress_bar(plan, opts))
     old_term = signal.signal(signal.SIGTERM, _on_sigterm)
     try:
-        while queue or runner.running:
-            limit = 1 if runner.warming else opts.workers
-            for _ in range(len(queue)):
-                if len(runner.running) >= limit:
-                    break
-                job = queue.popleft()
-                claimed = runner.claim(job) if runner.ready(job) else False
-                if claimed:
-                    runner.start(job)
-                elif claimed is None:  # stored by another runner of the shard meanwhile
-                    skipped += 1
-                    bar.update(1)
-                else:
-                    queue.append(job)
-            finished = runner.poll()
-            for att, status, usage in finished:
-                outcome = runner.finish(att, status, usage)
-                if outcome is None:
-                    queue.append(att.job)
-                    continue
-                try:
-                    _store(store, att.job.row, outcome, opts)
-                finally:
-                    att.out.unlink(missing_ok=True)
-                    runner.unclaim(att.job)
-                runner.by_class[outcome.failure_class] = (
-                    runner.by_class.get(outcome.failure_class, 0) + 1
-                )
-                if outcome.failure_class != FailureClass.CONVERGED:
-                    failed += 1
-                bar.set_postfix(failed=failed, running=len(runner.running), refresh=False)
-                bar.update(1)
-            if not finished:  # else start the next jobs at once
-                runner.server.wait_any(opts.poll_s)
+        loop.run()
     except BaseException:
         runner.kill_all()
         raise
     finally:
         signal.signal(signal.SIGTERM, old_term)
         runner.server.close()
-        bar.close()
+        loop.bar.close()
         for fd in runner.claims.values():
             release(fd)
     return RunSummary(
-        jobs=len(shard),
-        skipped=skipped,
+        jobs=plan.jobs,
+        skipped=loop.skipped,
         ran=sum(runner.by_class.values()),
         by_class=runner.by_class,
         attempts=runner.attempts,

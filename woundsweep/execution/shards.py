@@ -50,8 +50,9 @@ __all__ = [
 class Shard(NamedTuple):
     """Shard ``index`` of ``count`` (0-based, as in ``--shard i/N``)."""
 
-    index: int
-    count: int
+    # Fields named like tuple.index and tuple.count (they shadow the methods, never called).
+    index: int  # type: ignore[assignment]
+    count: int  # type: ignore[assignment]
 
     def __str__(self) -> str:
         return f"{self.index}/{self.count}"
@@ -69,12 +70,14 @@ def parse_shard(text: str) -> Shard:
 
 
 def _cells_estimate(row: JobRow) -> float:
-    """The mesh size law's cell count of the row's geometry (`mesh.sizing.estimate_cells`)."""
+    """The mesh size law's cell count of the row's geometry (`mesh.sizing.estimate_cells`) on
+    its P1 mesh, whatever the sweep's element: the cost fit above is over these counts, and
+    the partition depends on the manifest alone."""
     from ..config.geometry import GeometrySpec
     from ..mesh.sizing import estimate_cells
 
     try:
-        spec = GeometrySpec.from_row(row)
+        spec = GeometrySpec.from_row(row, None, element_degree=1)
     except WoundsweepError:  # cannot be built: it will fail fast as mesh-failed
         return 1.0
     return estimate_cells(spec)

@@ -40,6 +40,7 @@ import pandas as pd
 
 from ..core.errors import WoundsweepError
 from ..core.fsutil import atomic_write_bytes
+from ..core.layout import RunLayout
 from ..core.schema import parse_stage_range
 from .shards import Shard, estimate_cost, partition
 
@@ -104,7 +105,7 @@ class SlurmOptions:
 
     @property
     def slurm_dir(self) -> Path:
-        return self.run_dir / "slurm"
+        return RunLayout(self.run_dir).slurm_dir
 
     @property
     def log_dir(self) -> Path:
@@ -310,7 +311,7 @@ def write_scripts(opts: SlurmOptions) -> ScriptPaths:
     scripts = render(opts)
     opts.log_dir.mkdir(parents=True, exist_ok=True)
     opts.cache.mkdir(parents=True, exist_ok=True)
-    paths = []
+    paths: list[Path | None] = []
     for name, text in zip(SCRIPT_NAMES, scripts):
         path = opts.slurm_dir / name
         if text is None:
@@ -320,7 +321,7 @@ def write_scripts(opts: SlurmOptions) -> ScriptPaths:
         atomic_write_bytes(path, text.encode())
         path.chmod(0o755)
         paths.append(path)
-    return ScriptPaths(*paths)
+    return ScriptPaths(*paths)  # type: ignore[arg-type]  # only the warm-up's text may be None
 
 
 # ---- submission ----------------------------------------------------------------------------
@@ -366,7 +367,7 @@ def submit(paths: ScriptPaths, sbatch: str | None = None) -> Submission:
 
 def read_submissions(run_dir: Path) -> list[dict[str, Any]]:
     """The records of ``RUN_DIR/slurm/jobs.json`` (empty if none)."""
-    path = Path(run_dir) / "slurm" / "jobs.json"
+    path = RunLayout(run_dir).slurm_dir / "jobs.json"
     if not path.is_file():
         return []
     try:

@@ -5,7 +5,7 @@ fragment, and the closure zone's border lines are imprinted on the wound face, s
 union of whole facets, tagged WOUND_ZONE) under the size law of `woundsweep.mesh.sizing`, and the quarter is mirrored about
 x = w/2 and y = 0 in numpy. The mesh is therefore exactly mirror-symmetric, which the closure
 boundary condition at x = w/2 relies on, and it costs a quarter of a full build. Cell and
-facet tags are those of `woundsweep.core.schema`. The fusiform excision's quarter is built by
+facet tags and the `MeshData` record are those of `woundsweep.core.schema`. The fusiform excision's quarter is built by
 `woundsweep.mesh.fusiform`; its patch extends L beyond the wound along y too.
 """
 
@@ -16,7 +16,6 @@ import threading
 import time
 from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
-from typing import Any, NamedTuple
 
 import gmsh
 import numpy as np
@@ -34,6 +33,7 @@ from ..core.schema import (
     X_MIN,
     Y_MAX,
     Y_MIN,
+    MeshData,
 )
 from .fusiform import fusiform_quarter
 from .sizing import (
@@ -46,17 +46,6 @@ from .sizing import (
 )
 
 __all__ = ["MeshData", "build_mesh", "signed_volumes"]
-
-
-class MeshData(NamedTuple):
-    """A first-order tetrahedral mesh: arrays in mm, tags as in ``CELL_TAGS``/``FACET_TAGS``."""
-
-    points: np.ndarray  # (n, 3) float64, every node used by a cell, no duplicates
-    cells: np.ndarray  # (m, 4) int64, positively oriented
-    cell_tags: np.ndarray  # (m,) int32
-    facets: np.ndarray  # (k, 3) int64, each exterior triangle once
-    facet_tags: np.ndarray  # (k,) int32
-    info: dict[str, Any]
 
 
 # gmsh keeps global state: one build at a time per process.
@@ -224,7 +213,7 @@ def _classify(spec: GeometrySpec) -> tuple[dict[int, int], dict[int, int], dict[
         if hit is not None:
             snap[tag] = hit
             if planes[hit] is not None:
-                surfaces[tag] = planes[hit]
+                surfaces[tag] = planes[hit]  # type: ignore[assignment]  # not None: tested above
         else:
             surfaces[tag] = WOUND  # the only curved or slanted faces
     return vols, surfaces, snap
@@ -394,6 +383,7 @@ def build_mesh(spec: GeometrySpec) -> MeshData:
             "y_fraction": spec.zone_y_fraction,
             "depth_fraction": spec.zone_depth_fraction,
         },
+        "element_degree": spec.element_degree,
         "gmsh_version": gmsh.__version__,
     }
     return MeshData(

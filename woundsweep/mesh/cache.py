@@ -1,11 +1,14 @@
-"""Per-geometry mesh cache: ``RUN_DIR/meshes/<geometry_id>.npz``, written atomically.
+"""Per-run mesh cache: ``RUN_DIR/meshes/<mesh_id>.npz``, written atomically.
 
-The nine jobs of a geometry (skin types x orientations) share one mesh. A cached file is used
-only when it validates completely: it opens, holds the five arrays with the right dtypes and
-consistent shapes, node indices and tags are in range, the SHA-256 of the arrays matches the
-one stored beside them, and it was built from the same `GeometrySpec` (closure zone included)
-with the current `MESH_LAW_VERSION`. Anything else (truncated, corrupt, stale) is rebuilt and replaced; the
-temporary file + ``os.replace`` write means readers never see a partial file.
+A mesh is named by its `GeometrySpec.mesh_id`, the hash of everything that determines it (the
+geometric parameters, mesh size factor, closure zone, element degree and `MESH_LAW_VERSION`),
+so the nine jobs of a geometry (skin types x orientations) share one file and a sweep with
+another zone or element gets its own. A cached file is used only when it validates
+completely: it opens, holds the five arrays with the right dtypes and consistent shapes, node
+indices and tags are in range, the SHA-256 of the arrays matches the one stored beside them,
+and it records the same mesh id, element degree and `GeometrySpec`. Anything else
+(truncated, corrupt, stale) is rebuilt and replaced; the temporary file + ``os.replace``
+write means readers never see a partial file.
 """
 
 from __future__ import annotations
@@ -19,11 +22,13 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from ..config.geometry import GeometrySpec
+from ..config.solver import DEGREES
 from ..core.errors import StoreError
 from ..core.fsutil import atomic_write
-from ..core.schema import CELL_TAGS, FACET_TAGS
+from ..core.layout import RunLayout
+from ..core.schema import CELL_TAGS, FACET_TAGS, MeshData
 from ..core.versions import MESH_CACHE_FORMAT, MESH_LAW_VERSION
-from .build import MeshData, build_mesh
+from .build import build_mesh
 
 __all__ = [
     "CachedMesh",
@@ -54,11 +59,11 @@ class CachedMesh(NamedTuple):
     reason: str  # why a cached file was rejected ("" unless rebuilt)
 
 
-def mesh_path(run_dir: str | Path, geometry_id: str) -> Path:
-    """Cache file of a geometry (the id is the manifest's 16-hex ``geometry_id``)."""
-    if not isinstance(geometry_id, str) or not _ID.match(geometry_id):
-        raise StoreError(f"geometry id {geometry_id!r} is not 16 lowercase hex characters")
-    return Path(run_dir) / "meshes" / f"{geometry_id}.npz"
+def mesh_path(run_dir: str | Path, mesh_id: str) -> Path:
+    """Cache file of a mesh (the id is a 16-hex `GeometrySpec.mesh_id`)."""
+    if not isinstance(mesh_id, str) or not _ID.match(mesh_id):
+        raise StoreError(f"mesh id {mesh_id!r} is not 16 lowercase hex characters")
+    return RunLayout(run_dir).mesh_cache_file(mesh_id)
 
 
 def mesh_checksum(mesh: MeshData) -> str:
@@ -71,12 +76,14 @@ def mesh_checksum(mesh: MeshData) -> str:
     return digest.hexdigest()
 
 
-def save_mesh(path: str | Path, mesh: MeshData, spec: GeometrySpec, geometry_id: str) -> None:
-    """Write ``mesh`` atomically with its spec, law version and checksum."""
+def save_mesh(path: str | Path, mesh: MeshData, spec: GeometrySpec) -> None:
+    """Write ``mesh`` atomically with its spec, mesh id, element degree, law version and
+    checksum."""
     meta = {
         "format": MESH_CACHE_FORMAT,
         "mesh_law_version": MESH_LAW_VERSION,
-        "geometry_id": geometry_id,
+        "mesh_id": spec.mesh_id,
+        "element_degree": spec.element_degree,
         "spec": spec.to_dict(),
         "checksum": mesh_checksum(mesh),
         "info": mesh.info,
@@ -91,10 +98,9 @@ def save_mesh(path: str | Path, mesh: MeshData, spec: GeometrySpec, geometry_id:
     atomic_write(path, _write)
 
 
-def load_mesh(
-    path: str | Path, spec: GeometrySpec | None = None, geometry_id: str | None = None
-) -> MeshData:
-    """Read and validate a cached mesh; StoreError (one line, the reason) if it is unusable."""
+def load_mesh(path: str | Path, spec: GeometrySpec | None = None) -> MeshData:
+    """Read and validate a cached mesh (against ``spec`` when given); StoreError (one line, the
+    reason) if it is unusable."""
     path = Path(path)
     try:
         with np.load(path, allow_pickle=False) as npz:
@@ -107,28 +113,29 @@ def load_mesh(
         meta = json.loads(arrays.pop("meta").tobytes().decode())
     except (UnicodeDecodeError, ValueError) as err:
         raise StoreError(f"{path}: unreadable metadata ({err})") from None
-    problem = _check(arrays, meta, spec, geometry_id)
+    problem = _check(arrays, meta, spec)
     if problem:
         raise StoreError(f"{path}: {problem}")
     info = dict(meta["info"])
     return MeshData(info=info, **arrays)
 
 
-def _check(
-    arrays: dict[str, np.ndarray],
-    meta: Any,
-    spec: GeometrySpec | None,
-    geometry_id: str | None,
-) -> str:
+def _check(arrays: dict[str, np.ndarray], meta: Any, spec: GeometrySpec | None) -> str:
     """The first reason the cached arrays cannot be used, or ''."""
     if not isinstance(meta, dict) or meta.get("format") != MESH_CACHE_FORMAT:
         return "unknown cache format"
     if meta.get("mesh_law_version") != MESH_LAW_VERSION:
         return f"built with mesh law {meta.get('mesh_law_version')}, now {MESH_LAW_VERSION}"
-    if geometry_id is not None and meta.get("geometry_id") != geometry_id:
-        return f"holds geometry {meta.get('geometry_id')}, not {geometry_id}"
-    if spec is not None and meta.get("spec") != json.loads(json.dumps(spec.to_dict())):
-        return "built from other geometric parameters"
+    degree = meta.get("element_degree")
+    if degree not in DEGREES:
+        return f"records no element degree of {DEGREES} ({degree!r})"
+    if spec is not None:
+        if degree != spec.element_degree:
+            return f"built for P{degree} elements, not P{spec.element_degree}"
+        if meta.get("mesh_id") != spec.mesh_id:
+            return f"holds mesh {meta.get('mesh_id')}, not {spec.mesh_id}"
+        if meta.get("spec") != json.loads(json.dumps(spec.to_dict())):
+            return "built from other geometric parameters"
     for name, (dtype, tail) in _ARRAYS.items():
         arr = arrays[name]
         if arr.dtype != dtype or arr.shape[1:] != tail or arr.ndim != 1 + len(tail):
@@ -150,20 +157,23 @@ def _check(
     info = meta.get("info")
     if not isinstance(info, dict):
         return "missing mesh info"
+    if info.get("element_degree") != degree:
+        return f"its info records element degree {info.get('element_degree')!r}, not {degree}"
     if mesh_checksum(MeshData(info=info, **arrays)) != meta.get("checksum"):
         return "checksum mismatch"
     return ""
 
 
-def get_mesh(run_dir: str | Path, geometry_id: str, spec: GeometrySpec) -> CachedMesh:
-    """The geometry's mesh: the cached one if valid, else built (GeometryError) and cached."""
-    path = mesh_path(run_dir, geometry_id)
+def get_mesh(run_dir: str | Path, spec: GeometrySpec) -> CachedMesh:
+    """The mesh of ``spec``: the cached one (``meshes/<mesh_id>.npz``) if valid, else built
+    (GeometryError) and cached."""
+    path = mesh_path(run_dir, spec.mesh_id)
     reason = ""
     if path.exists():
         try:
-            return CachedMesh(load_mesh(path, spec, geometry_id), path, "cached", "")
+            return CachedMesh(load_mesh(path, spec), path, "cached", "")
         except StoreError as err:
             reason = str(err)
     mesh = build_mesh(spec)
-    save_mesh(path, mesh, spec, geometry_id)
+    save_mesh(path, mesh, spec)
     return CachedMesh(mesh, path, "rebuilt" if reason else "built", reason)

@@ -15,7 +15,9 @@ __all__, __getattr__, __dir__ = lazy_exports(
         "materials": ("Fung", "JobMaterials", "MooneyRivlin"),
         "forms": ("WoundForms",),
         "problem": ("WoundProblem",),
-        "stages": ("StageOutcome", "WoundModel"),
+        "model": ("StageOutcome", "WoundModel"),
+        "loadpath": ("LoadStep", "PenaltyRamp", "Solve", "run_load_step"),
+        "stages": ("run_stage", "stage_recipe"),
         "job": ("run_stages", "solve_job"),
     },
 )

@@ -31,6 +31,7 @@ from ..core.schema import (
     X_MIN,
     Y_MAX,
     Y_MIN,
+    MeshData,
 )
 from ..solver.symmetry import Isometry, SymmetryBasis, mirror_node_map, symmetry_basis
 from . import compat
@@ -55,17 +56,16 @@ def dof_rows(nodes: Any, comp: int) -> np.ndarray:
 class WoundDomain:
     """Mesh, space, index maps, boundary sets and closure zone of one wound patch.
 
-    ``mesh_data`` has the `MeshData` fields ``points``, ``cells``, ``cell_tags``, ``facets``,
-    ``facet_tags`` (docs/design.md). The closure zone is the mesh's WOUND_ZONE facets;
-    ``zone``, when given, must be the one the mesh was built with (``info["closure_zone"]``,
-    if recorded). ``degree`` is the displacement element's (1 or 2). Raises ValueError for a
-    mesh that does not fit the contract (unused points, no deep face or x faces, another
-    closure zone).
+    ``mesh_data`` is a `MeshData` (docs/design.md). The closure zone is the mesh's
+    WOUND_ZONE facets; ``zone``, when given, must be the one the mesh was built with
+    (``info["closure_zone"]``, if recorded). ``degree`` is the displacement element's (1 or
+    2). Raises ValueError for a mesh that does not fit the contract (unused points, no deep
+    face or x faces, another closure zone).
     """
 
     def __init__(
         self,
-        mesh_data: Any,
+        mesh_data: MeshData,
         zone: ClosureZone | None = None,
         degree: int = SolverSettings.element_degree,
     ) -> None:
@@ -222,7 +222,7 @@ class WoundDomain:
             flips = [np.array([-1.0, 1.0, 1.0]), np.array([1.0, -1.0, 1.0])]
             if not mirrors:
                 flips = [flips[0] * flips[1]]
-            gens = []
+            gens: list[Isometry] = []
             for f in flips:
                 image = np.where(f < 0, c - self.X, self.X)
                 nodes = mirror_node_map(self.X, image, 1e-9 * self.ell)

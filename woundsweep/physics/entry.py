@@ -75,9 +75,7 @@ def solve(
         from ..store.identity import result_fingerprint
 
         if result_fingerprint(run.sweep, run.job(job_index)) != fingerprint:
-            raise SweepChanged(
-                f"job {job_index}: {Path(run_dir) / 'sweep.yaml'} changed since the run started"
-            )
+            raise SweepChanged(f"job {job_index}: {run.layout.sweep} changed since the run started")
     from .job import NotConvergedError, StageRecord, solve_job
 
     logging.getLogger().setLevel(logging.WARNING)  # FFCx/cffi log every compile at INFO

@@ -25,13 +25,13 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, NamedTuple
+from typing import TYPE_CHECKING, Any, NamedTuple, cast
 
 import numpy as np
 
 from ..core.diagnostics import StageDiagnostics, StageReport
 from ..core.errors import GeometryError, SolverError, WoundsweepError
-from ..core.schema import ExitCode, StageResult, StageStatus, start_stage
+from ..core.schema import ExitCode, MeshData, StageResult, StageStatus, start_stage
 from .closure import LineLoads
 from .profiles import line_maxima, locate_cells, profile_lines, sample_profiles, wound_edge_x
 
@@ -39,7 +39,7 @@ if TYPE_CHECKING:
     from ..config.manifest import JobRow, Run
     from .forms import StressSamples
     from .materials import JobMaterials
-    from .stages import WoundModel
+    from .model import WoundModel
 
 __all__ = [
     "JobOutcome",
@@ -63,7 +63,7 @@ class StageRecord(NamedTuple):
     """A stage's result row, its diagnostics and (if converged) its fields in input order."""
 
     result: StageResult
-    extra: StageDiagnostics
+    diagnostics: StageDiagnostics
     displacement_mm: np.ndarray | None
     von_mises_kPa: np.ndarray | None
     # Von Mises on the `profiles` lines, (3, PROFILE_POINTS), if converged.
@@ -117,24 +117,26 @@ def stress_summary(
     n_nodes = int(cell_nodes.max()) + 1
     num = np.zeros(n_nodes)
     den = np.zeros(n_nodes)
-    for j in range(cell_nodes.shape[1]):
-        np.add.at(num, cell_nodes[:, j], vm * volumes)
-        np.add.at(den, cell_nodes[:, j], volumes)
+    for col in range(cell_nodes.shape[1]):
+        np.add.at(num, cell_nodes[:, col], vm * volumes)
+        np.add.at(den, cell_nodes[:, col], volumes)
     nodal = num[den > 0] / den[den > 0]
     nodal_p99 = float(np.percentile(nodal, 99))
     sampled = samples is not None and corners is not None
     if sampled:
+        assert samples is not None  # sampled says so
         values = np.asarray(samples.values, dtype=float)
         weights = volumes[:, None] * np.asarray(samples.weights, dtype=float)[None, :]
     else:
         values, weights = vm[:, None], volumes[:, None]
     valid = np.isfinite(values)
-    if sampled and samples.det_F is not None:
-        valid &= np.asarray(samples.det_F) > 0
+    if sampled and samples.det_F is not None:  # type: ignore[union-attr]  # sampled: not None
+        valid &= np.asarray(samples.det_F) > 0  # type: ignore[union-attr]
     if not valid.any():  # every sample inverted: no stress to report
         return {key: math.nan for key in _STRESS_KEYS} | {"p99_von_mises_nodal_kPa": nodal_p99}
     i, j = np.unravel_index(int(np.argmax(np.where(valid, values, -np.inf))), values.shape)
     if sampled:
+        assert samples is not None and corners is not None  # sampled says so
         c = np.asarray(corners[i], dtype=float)
         where = c[0] + (c[1:] - c[0]).T @ np.asarray(samples.points[j], dtype=float)
     else:
@@ -193,28 +195,33 @@ def run_stages(
     unconverged stage 3 does not stop stages 4-6. Returns one record per stage
     1..last_stage (``not-run`` for a stage that could not run).
     """
+    from .stages import run_stage
+
     model.set_materials(materials)
     d = model.domain
     dofs = d.n_dofs
     cells = len(d.cells)
+    degree = int(d.degree)
     cell_input_order = np.argsort(d.cell_input)
     lines = profile_lines(d.X, wound_edge_x(d.points, d.facets, d.facet_tags))
     line_cells = locate_cells(d, lines.reshape(-1, 3)).reshape(lines.shape[:2])
     records: list[StageRecord] = []
-    status = {0: StageStatus.CONVERGED}
+    status: dict[int, str] = {0: StageStatus.CONVERGED}
     for k in range(1, last_stage + 1):
         ran = k == 1 or status[k - 1] != StageStatus.NOT_RUN
         if not ran or status[start_stage(k)] != StageStatus.CONVERGED:
             status[k] = StageStatus.NOT_RUN
-            records.append(StageRecord(StageResult(k, StageStatus.NOT_RUN), {}, None, None))
+            not_run = StageResult(k, StageStatus.NOT_RUN, element_degree=degree)
+            records.append(StageRecord(not_run, {}, None, None))
             continue
-        out = model.run_stage(k)
+        out = run_stage(model, k)
         s = out.solve
         ok = s.status == StageStatus.CONVERGED
         vm = model.forms.von_mises_cells() if ok else None
         stats: dict[str, float] = {}
         min_J = d.min_det(model.u)
         if ok:
+            assert vm is not None  # computed when ok
             samples = model.forms.von_mises_samples()  # None on P1: the cells are the samples
             corners = None if samples is None else d.X[d.cell_vertices]
             stats = stress_summary(vm, d.volumes, d.cell_vertices, d.midpoints, samples, corners)
@@ -235,28 +242,31 @@ def run_stages(
             residual_norm=_finite(s.residual_norm),
             dofs=dofs,
             cells=cells,
-            **stats,
-            **contact,
+            element_degree=degree,
+            **stats,  # type: ignore[arg-type]  # StageResult's float fields
+            **contact,  # type: ignore[arg-type]  # its n_penetrating is an int
             **closure,
         )
-        extra = {
+        diagnostics = {
             "load_increments": int(s.increments),
             "load_cuts": int(s.cuts),
             "load_reached": float(s.load_reached),
             "assembly_time_s": float(s.assembly_time_s),
             "factor_time_s": float(s.factor_time_s),
         }
-        extra.update({key: v for key, v in out.diagnostics.items() if key not in result._fields})
-        profiles = sample_profiles(line_cells, vm) if ok else None
+        diagnostics.update(
+            {key: v for key, v in out.diagnostics.items() if key not in result._fields}
+        )
+        profiles = sample_profiles(line_cells, cast(np.ndarray, vm)) if ok else None
         if profiles is not None:
-            extra.update(line_maxima(lines, profiles))
+            diagnostics.update(line_maxima(lines, profiles))
         if loads is not None:
-            extra.update(_line_load_maxima(loads))
+            diagnostics.update(_line_load_maxima(loads))
         rec = StageRecord(
             result,
-            {key: _finite(v) for key, v in extra.items()},
+            cast(StageDiagnostics, {key: _finite(v) for key, v in diagnostics.items()}),
             model.displacement_input().astype(np.float32) if ok else None,
-            vm[cell_input_order].astype(np.float32) if ok else None,
+            cast(np.ndarray, vm)[cell_input_order].astype(np.float32) if ok else None,
             profiles,
             loads,
         )
@@ -270,7 +280,7 @@ def run_stages(
 def write_output(
     path: str | Path,
     attrs: Mapping[str, Any],
-    mesh: Any,
+    mesh: MeshData,
     records: list[StageRecord],
     first_stage: int = 1,
 ) -> None:
@@ -279,7 +289,7 @@ def write_output(
     from . import compat
 
     keep = [r for r in records if r.result.stage >= first_stage]
-    reports = [StageReport(r.result, r.extra) for r in keep]
+    reports = [StageReport(r.result, r.diagnostics) for r in keep]
     fields = {
         r.result.stage: (r.displacement_mm, r.von_mises_kPa)
         for r in keep
@@ -303,17 +313,25 @@ def write_output(
 
 
 def job_model(
-    run: Run, row: JobRow, mesh: Any, jit: dict[str, Any] | None = None
+    run: Run, row: JobRow, mesh: MeshData, jit: dict[str, Any] | None = None
 ) -> tuple[WoundModel, JobMaterials]:
     """The `WoundModel` of a manifest row on ``mesh`` with the run's settings, and the job's
-    materials (GeometryError for a mesh that does not fit the contract)."""
+    materials (GeometryError for a mesh that does not fit the contract or was built for
+    another element degree than the sweep's)."""
     from .materials import JobMaterials
-    from .stages import WoundModel
+    from .model import WoundModel
 
     job_index = int(row["job_index"])
     skin, angle = str(row["skin_type"]), float(row["orientation_deg"])
     if skin not in run.sweep.materials.skin_types:
         raise SolverError(f"job {job_index}: unknown skin type {skin!r}")
+    # The size law spaces a mesh's nodes for its element: a P1 mesh solved as P2 (or the
+    # reverse) is another discretisation than the sweep's.
+    sized, degree = mesh.info.get("element_degree"), run.sweep.solver.element_degree
+    if sized is not None and sized != degree:
+        raise GeometryError(
+            f"job {job_index}: the mesh was built for P{sized} elements, the sweep's are P{degree}"
+        )
     materials = JobMaterials.from_sweep(run.sweep.materials, skin, angle)
     try:
         model = WoundModel(mesh, run.sweep.solver, run.sweep.stages, jit=jit)
@@ -341,12 +359,12 @@ def solve_job(
 
     run = run if run is not None else load_run(run_dir)  # a caller's run: its sweep, checked
     row = run.job(job_index)
-    mesh = get_mesh(run.run_dir, str(row["geometry_id"]), run.geometry(row)).mesh
+    mesh = get_mesh(run.run_dir, run.geometry(row)).mesh
     model, materials = job_model(run, row, mesh, jit)
     records = run_stages(model, materials, stages[1], echo=echo)
     reported = [r for r in records if r.result.stage >= stages[0]]
     ok = all(r.result.status == StageStatus.CONVERGED for r in records)
-    path = Path(out) if out is not None else run.run_dir / "solve" / f"job_{int(job_index)}.h5"
+    path = Path(out) if out is not None else run.layout.solve_file(job_index)
     attrs = {
         "job_id": str(row["job_id"]),
         "job_index": int(job_index),

@@ -20,7 +20,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from abc import ABC, abstractmethod
-from typing import Any, NamedTuple
+from typing import TYPE_CHECKING, Any, ClassVar, NamedTuple
 
 import numpy as np
 import ufl
@@ -71,6 +71,10 @@ def langer_axis(orientation_deg: float) -> np.ndarray:
 
 class Material(ABC):
     """A hyperelastic material: the stress is the derivative of `strain_energy`."""
+
+    if TYPE_CHECKING:  # every material is a dataclass with a bulk modulus field K
+        __dataclass_fields__: ClassVar[dict[str, dataclasses.Field[Any]]]
+        K: Any
 
     @abstractmethod
     def strain_energy(self, F: Any) -> Any:

@@ -7,7 +7,7 @@ or None for an unwounded patch) and the closure zone's tangential tie
 contact and tie terms are added while the penalty is on (``contact.k_V_kPa > 0``; the tie only
 once set); ``multipliers`` are the contact multipliers Newton carries there. The potential is
 not used by Newton: that it exists (every load is dead) makes the tangent symmetric, and
-`tests/test_stages_contact.py` checks R = dPi/du.
+`tests/physics/test_stages_contact.py` checks R = dPi/du.
 
 Sparsity of the tangent matrix ``A``: while the contact is off, that of the form; while it is
 on, the form's plus the contact's coupling pattern (planned at the first tangent of a contact
@@ -174,6 +174,7 @@ class WoundProblem:
         # The block matrix holds whole 3x3 blocks; A takes its entries at the next assembly.
         M = self._B if self._B is not None else A
         if M is self._B:
+            assert M is not None  # it is self._B, which is not None here
             P = _blocks(P, M.getBlockSize())
             self._B_nnz = None
         M.setPreallocationCSR((P.indptr.astype(PETSc.IntType), P.indices.astype(PETSc.IntType)))

@@ -16,11 +16,14 @@ the reference configuration (on a face between cells, the one it lies deepest in
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..core.schema import PROFILE_LINES, PROFILE_POINTS, WOUND_TAGS
+
+if TYPE_CHECKING:
+    from .domain import WoundDomain
 
 __all__ = [
     "wound_edge_x",
@@ -65,7 +68,7 @@ def wound_edge_x(points: np.ndarray, facets: np.ndarray, facet_tags: np.ndarray)
     return None if abs(edge - rule) <= 1e-6 * float(hi[0] - lo[0]) else edge
 
 
-def locate_cells(domain: Any, points: np.ndarray, tol: float = 1e-9) -> np.ndarray:
+def locate_cells(domain: WoundDomain, points: np.ndarray, tol: float = 1e-9) -> np.ndarray:
     """Index (mesh cell order) of the cell holding each point, -1 where none does.
 
     Barycentric coordinates from the reference cell maps; the cell whose smallest coordinate

@@ -35,14 +35,14 @@ from ..config.fusiform import Lens
 from ..config.paper import ClosureZone, StageSettings
 from ..config.solver import SolverSettings
 from ..config.sutures import ItchLoad, SuturePlan
-from ..contact import FlankContact, ZoneTie, split_wound_flanks
-from ..core.schema import StageStatus
-from ..solver.continuation import LoadState, continuation
-from ..solver.newton import NewtonSolver, Policy
-from .domain import dof_rows
+from ..contact import ZoneTie
+from ..core.schema import MeshData, StageStatus
+from ..solver.dirichlet import Dirichlet
+from .domain import WoundDomain, dof_rows
+from .loadpath import LoadStep, Solve, run_load_step
 from .materials import JobMaterials
-from .problem import WoundProblem
-from .stages import CONTACT_MAX_DECADES, CONTACT_START_kPa, WoundModel
+from .model import WoundModel
+from .stages import contact_ramp, run_stage
 from .suture_measures import SurfacePatch, SutureState, measure_state, surface_patch
 
 __all__ = ["BLEND_mm", "SolveStep", "SuturedClosure"]
@@ -69,7 +69,7 @@ class SuturedClosure:
 
     def __init__(
         self,
-        mesh: Any,
+        mesh: MeshData,
         lens: Lens,
         zone_depth_fraction: float = ClosureZone.depth_fraction,
         solver: SolverSettings | None = None,
@@ -78,11 +78,8 @@ class SuturedClosure:
         self.solver = solver or SolverSettings()
         stages = StageSettings(ClosureZone(1.0, zone_depth_fraction))
         self.model = WoundModel(mesh, self.solver, stages, jit=jit, tie_zone=False)
-        if self.model.contact is None or self.model.closure_line is None:
+        if self.model.flanks is None or self.model.closure_line is None:
             raise ValueError("the mesh has no wound to suture")
-        d = self.model.domain
-        flanks = split_wound_flanks(d.X, d.cell_vertices, d.wound_facets(), d.x_c)
-        self.flanks = tuple(d.element.sub_triangles(f) for f in flanks)
         self.lens = lens
         self.closed_u: np.ndarray | None = None
         self.sutured_u: np.ndarray | None = None
@@ -92,7 +89,7 @@ class SuturedClosure:
         self.orientation_deg = 0.0
 
     @property
-    def domain(self) -> Any:
+    def domain(self) -> WoundDomain:
         return self.model.domain
 
     def close(self, materials: JobMaterials, orientation_deg: float) -> list[SolveStep]:
@@ -101,7 +98,7 @@ class SuturedClosure:
         self.model.set_materials(materials)
         out = []
         for k in (1, 2):
-            o = self.model.run_stage(k)
+            o = run_stage(self.model, k)
             ok = o.solve.status == StageStatus.CONVERGED
             state = self._measure() if ok else None
             out.append(SolveStep(o.solve.status, int(o.solve.iterations), o.time_s, state))
@@ -153,35 +150,27 @@ class SuturedClosure:
         W[rows, j] += 1.0 - wi
         return W
 
-    def _rebuild(self, tie: ZoneTie) -> None:
-        """A contact, problem and Newton solver with ``tie`` (the sutures) on the model."""
-        m, d = self.model, self.domain
-        left, right = self.flanks
-        m.tie = tie
-        m.contact = FlankContact(d.X, left, right, tied=tie.pairs.ravel())
-        m.problem = WoundProblem(d, m.forms, m.contact, tie)
-        m.newton = NewtonSolver(m.problem, m.problem.A, self.solver.newton)
-
     def suture(self, plan: SuturePlan, ys: Sequence[float] | None = None) -> SolveStep:
         """Close the wound by the sutures of ``plan`` (at ``ys``, default the plan's
         positions) from the stage-2 state (module docstring)."""
         if self.closed_u is None:
             raise RuntimeError("close() first")
         t0 = time.perf_counter()
-        d = self.domain
+        m, d = self.model, self.domain
         ys = tuple(plan.positions(2 * self.lens.a) if ys is None else ys)
         held = self.footprints(ys, plan.bite_width_mm)
         left = held[d.X[held, 0] < d.x_c]
         right = held[d.X[held, 0] >= d.x_c]
-        tie = ZoneTie(d.X, left, right, self.flanks[0], d.x_c)
-        self._rebuild(tie)
+        assert m.flanks is not None
+        tie = ZoneTie(d.X, left, right, m.flanks[0], d.x_c)
+        m.attach_tie(tie)
         self._shares = self.shares(d.X[tie.pairs[:, 0], 1], ys)
         self.positions_mm = ys
-        m = self.model
-        m.u[:] = self.closed_u
-        # 1. The zone released but under the sutures (Dirichlet there; no contact).
-        rows = np.concatenate([d.gauge_rows(), dof_rows(held, 0)])
-        res = self._release(rows, Policy(m.settings, symmetric=True))
+        gauge = Dirichlet(d.gauge_rows())
+        # 1. The zone released but under the sutures (held there; no contact).
+        footprints = Dirichlet(dof_rows(held, 0))
+        released = LoadStep("suture-release", (gauge, footprints), self.closed_u, first_step=1.0)
+        res = run_load_step(m, released).solve
         its = int(res.iterations)
         if res.status != StageStatus.CONVERGED:
             return SolveStep(res.status, its, time.perf_counter() - t0, None)
@@ -189,52 +178,25 @@ class SuturedClosure:
         self.dirichlet_force_mN = r[3 * tie.pairs[:, 0]] @ self._shares
         # 2. The footprints tied there, their Dirichlet condition released into the tie, and
         # the contact ramped in (as stage 4).
-        tie.set_reference(m.u)
-        c = m.contact
-        k_from, k_to = CONTACT_START_kPa, m.contact_penalty_kPa[0]
-        rows = d.gauge_rows()
-        res = self._release(rows, Policy.contact(m.settings), (k_from, k_to))
+        tied = LoadStep(
+            "suture-tie",
+            (gauge,),
+            penalty=contact_ramp(m.contact_penalty_kPa[0]),
+            tie_at_start=True,
+            solve=Solve.CONTACT,
+        )
+        res = run_load_step(m, tied).solve
         its += int(res.iterations)
         ok = res.status == StageStatus.CONVERGED
-        c.k_V_kPa = k_to
         self.sutured_u = m.u.copy() if ok else None
         state = self._measure() if ok else None
         return SolveStep(res.status, its, time.perf_counter() - t0, state)
-
-    def _release(
-        self, rows: np.ndarray, policy: Policy, penalty: tuple[float, float] | None = None
-    ) -> Any:
-        """Continuation from the current state holding ``rows`` where they are and releasing
-        the out-of-balance force of every other dof; with ``penalty`` (from, to) the contact's
-        k_V ramps geometrically over the path (contact off before, as in stage 4)."""
-        m = self.model
-        c = m.contact
-        c.k_V_kPa = 0.0
-        offset = m.problem.residual_array()
-        offset[rows] = 0.0
-        values = m.u[rows].copy()
-        scale = float(np.linalg.norm(m.problem.internal_force()))
-        if penalty is None:
-
-            def load(s: float) -> LoadState:
-                return LoadState(values, (1.0 - s) * offset)
-
-            return continuation(m.newton, rows, load, scale, 1.0, policy)
-        k_from, k_to = penalty
-
-        def ramp(s: float) -> LoadState:
-            c.k_V_kPa = k_from ** (1.0 - s) * k_to**s
-            return LoadState(values, (1.0 - s) * offset)
-
-        decades = np.log10(k_to / k_from)
-        first, largest = 0.5 / decades, CONTACT_MAX_DECADES / decades
-        return continuation(m.newton, rows, ramp, scale, first, policy, largest)
 
     def suture_forces(self) -> np.ndarray:
         """Per suture, the tie's pull across the wound on its left footprint (mN; positive
         holds the walls together)."""
         m = self.model
-        if self._shares is None or m.tie is None or not m.tie.active:
+        if self._shares is None or m.tie is None or m.contact is None or not m.tie.active:
             return np.zeros(len(self.positions_mm))
         f = m.tie.force_vector(m.u, m.contact.k_V_kPa)
         return -(f[3 * m.tie.pairs[:, 0]] @ self._shares)
@@ -253,31 +215,27 @@ class SuturedClosure:
         if self.sutured_u is None:
             raise RuntimeError("suture() first")
         m, d = self.model, self.domain
-        u = m.u
-        u[:] = self.sutured_u
         E = np.asarray(load.gradient(self.orientation_deg))
         lateral = np.union1d(d.x_face_nodes, d.y_face_nodes)
         rows = np.unique(
             np.concatenate([d.gauge_rows(), dof_rows(lateral, 0), dof_rows(lateral, 1)])
-        ).astype(np.int32)
+        )
         node, comp = rows // 3, rows % 3
         disp = (d.X[node, :2] - np.array([d.x_c, d.y_c])) @ E.T  # E (X - X_c) per row's node
         inc = np.where(comp < 2, disp[np.arange(len(rows)), np.minimum(comp, 1)], 0.0)
-        start = u[rows].copy()
-        policy = Policy.contact(m.settings)
+        start = self.sutured_u[rows]
         out: list[SolveStep] = []
         for j in range(1, steps + 1):
             t0 = time.perf_counter()
-            a = u[rows].copy()
-            b = start + (j / steps) * inc
-            offset = m.problem.residual_array()
-            offset[rows] = 0.0
-            scale = float(np.linalg.norm(m.problem.internal_force()))
-
-            def ramp(s: float, a: Any = a, b: Any = b, off: Any = offset) -> LoadState:
-                return LoadState(a + s * (b - a), (1.0 - s) * off)
-
-            res = continuation(m.newton, rows, ramp, scale, 1.0, policy)
+            moved = Dirichlet(rows, start + (j / steps) * inc)
+            step = LoadStep(
+                f"itch-{j}",
+                (moved,),
+                self.sutured_u if j == 1 else None,
+                solve=Solve.CONTACT,
+                first_step=1.0,
+            )
+            res = run_load_step(m, step).solve
             ok = res.status == StageStatus.CONVERGED
             state = self._measure() if ok else None
             out.append(SolveStep(res.status, int(res.iterations), time.perf_counter() - t0, state))

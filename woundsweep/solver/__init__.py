@@ -14,6 +14,7 @@ __all__, __getattr__, __dir__ = lazy_exports(
     __name__,
     {
         "continuation": ("ContinuationResult", "LoadState"),
+        "dirichlet": ("Dirichlet",),
         "newton": ("NewtonResult", "NewtonSolver", "NonlinearProblem", "Policy"),
         "symmetry": ("Isometry", "Subspace", "SymmetryBasis", "mirror_node_map", "symmetry_basis"),
     },

@@ -13,15 +13,16 @@ from typing import NamedTuple
 
 import numpy as np
 
+from .dirichlet import Dirichlet
 from .newton import CONVERGED, MAX_ITERATIONS, NewtonResult, NewtonSolver, Policy
 
 __all__ = ["ContinuationResult", "LoadState", "continuation"]
 
 
 class LoadState(NamedTuple):
-    """Constraint values and out-of-balance offset at a load factor s."""
+    """The Dirichlet condition and the out-of-balance offset at a load factor s."""
 
-    values: np.ndarray
+    bc: Dirichlet
     offset: np.ndarray | None
 
 
@@ -43,7 +44,6 @@ class ContinuationResult(NamedTuple):
 
 def continuation(
     newton: NewtonSolver,
-    rows: np.ndarray,
     load: Callable[[float], LoadState],
     force_scale: float = 0.0,
     first_step: float | None = None,
@@ -72,7 +72,7 @@ def continuation(
         state = load(s_next)
         # Only the stage's end (s = 1) is a result; the states before it only carry the path.
         step_policy = policy if s_next >= 1.0 else policy._replace(path=True)
-        res = newton.solve(rows, state.values, state.offset, force_scale, step_policy)
+        res = newton.solve(state.bc, state.offset, force_scale, step_policy)
         last = res
         its += res.iterations
         times += (res.assembly_time_s, res.factor_time_s, res.solve_time_s, res.residual_time_s)

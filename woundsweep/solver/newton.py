@@ -53,6 +53,7 @@ from petsc4py import PETSc
 
 from ..config.solver import NewtonSettings
 from ..core.schema import StageStatus
+from .dirichlet import Dirichlet
 from .symmetry import Subspace, SymmetryBasis
 
 __all__ = ["Multipliers", "NewtonResult", "NewtonSolver", "NonlinearProblem", "Policy"]
@@ -157,7 +158,11 @@ _NONE = _NoMultipliers()
 class NonlinearProblem(Protocol):
     """What Newton needs from a discretised problem (all arrays in dof order, flat)."""
 
-    multipliers: Multipliers | None  # variables carried beside u, if any
+    @property
+    def multipliers(self) -> Multipliers | None:
+        """Variables carried beside u, if any (read-only here: Newton never reassigns them,
+        so a problem may narrow the type, e.g. to `ContactMultipliers`)."""
+        ...
 
     def solution(self) -> np.ndarray:
         """Writable view of the current displacement dofs."""
@@ -327,26 +332,24 @@ class NewtonSolver:
         # of a symmetric state, relatively large only where the residual is near zero); a
         # problem that is not symmetric leaves a larger error and fails.
         floor = 0.0 if self._sub is None else self._sub.antisymmetric_norm(rhs)
-        return du if err <= LINEAR_RTOL * max(np.linalg.norm(rhs), 1e-300) + floor else None
+        return du if err <= LINEAR_RTOL * max(float(np.linalg.norm(rhs)), 1e-300) + floor else None
 
     # -- the solve ----------------------------------------------------------------------
 
     def solve(
         self,
-        rows: np.ndarray,
-        values: np.ndarray,
+        bc: Dirichlet,
         offset: np.ndarray | None = None,
         force_scale: float = 0.0,
         policy: Policy | None = None,
     ) -> NewtonResult:
-        """Solve R(u) - offset = 0 at the free dofs with u[rows] = values.
+        """Solve R(u) - offset = 0 at the free dofs with u = bc's values at its rows.
 
         ``policy`` defaults to the solver's settings with the residual rule."""
         self._policy = policy if policy is not None else Policy(self.settings)
         st = self._policy.settings
         u = self.problem.solution()
-        rows = np.asarray(rows, dtype=np.int32)
-        values = np.asarray(values, dtype=float)
+        rows, values = bc.rows, bc.target
         ell = self.problem.length_scale()
         free = np.ones(len(u), dtype=bool)
         free[rows] = False

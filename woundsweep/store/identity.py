@@ -67,7 +67,7 @@ def result_fingerprint(sweep: Sweep, job: JobRow | Mapping[str, Any]) -> str:
         "mesh_law": MESH_LAW_VERSION,
         "statistics": STATISTICS_VERSION,
         "stages_model": STAGES_VERSION,
-        "job": {k: _plain(job[k]) for k in _JOB_KEYS},
+        "job": {k: _plain(job[k]) for k in _JOB_KEYS},  # type: ignore[literal-required]  # JobRow keys
         "materials": {
             "subcutis": _plain(materials["subcutis"]),
             "skin": _plain(materials["skin_types"].get(skin)),

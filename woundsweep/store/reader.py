@@ -2,19 +2,20 @@
 
 Every result file has the schema `result_schema` (fixed, so the files always form one
 dataset): the manifest columns, ``stage``, ``status``, the failure columns, the `StageResult`
-fields (`STAGE_FIELDS`) and the job's bookkeeping, including its `identity` fingerprint and
+fields (`STAGE_FIELDS`), one column per stage diagnostic (`DIAGNOSTIC_FIELDS`) and the job's
+bookkeeping, including its `identity` fingerprint and
 the checksums of its fields and mesh files. Its footer record (key ``woundsweep``) holds the
 format version, the job id, the stages, the failure class, the fingerprint, the fields file
 with its size and sha256, the mesh file's sha256, and a sha256 of the rows' values, since page
 CRCs miss some damage (e.g. in page headers). `check_result` sorts a stored file into done,
-stale, corrupt or damaged; `read_results` returns the current rows of a run.
+stale, corrupt or damaged; `read_results` returns the current rows of a run and
+`rows_element_degree` the element they were computed with.
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
-import re
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any, NamedTuple
@@ -23,14 +24,17 @@ import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from ..config.manifest import load_run
+from ..config.manifest import Run, load_run
 from ..config.sweep import MANIFEST_COLUMNS
+from ..core.diagnostics import DIAGNOSTIC_KINDS
 from ..core.errors import StoreError
+from ..core.layout import FIELDS_NAME, MESH_NAME, RESULT_NAME, RunLayout
 from ..core.schema import ResultState, stage_field_kinds
 from ..core.versions import RESULT_FORMAT_VERSION
 from .identity import file_sha256, fingerprints
 
 __all__ = [
+    "DIAGNOSTIC_FIELDS",
     "META_KEY",
     "RESULT_NAME",
     "STAGE_FIELDS",
@@ -47,6 +51,7 @@ __all__ = [
     "result_files",
     "read_parquet_file",
     "result_schema",
+    "rows_element_degree",
     "scan_results",
     "scan_store",
     "stale_reason",
@@ -58,9 +63,12 @@ __all__ = [
 STAGE_FIELDS: dict[str, pa.DataType] = {
     name: pa.int64() if kind is int else pa.float64() for name, kind in stage_field_kinds().items()
 }
+# The stage diagnostics (`core.diagnostics`), one column each, null where a stage has none.
+DIAGNOSTIC_FIELDS: dict[str, pa.DataType] = {
+    name: pa.int64() if kind is int else pa.float64() for name, kind in DIAGNOSTIC_KINDS.items()
+}
 _MANIFEST_STRINGS = ("job_id", "geometry_id", "wound_shape", "skin_type")
 _JOB_FIELDS: dict[str, pa.DataType] = {
-    "stage_extra_json": pa.string(),  # StageResult keys this version does not know, kept
     "exit_code": pa.int64(),
     "attempts": pa.int64(),
     "job_wall_time_s": pa.float64(),
@@ -85,11 +93,6 @@ _JOB_FIELDS: dict[str, pa.DataType] = {
     "mesh_file_sha256": pa.string(),
 }
 META_KEY = b"woundsweep"
-# The names the store gives its result files; anything else in results/ is not the store's.
-RESULT_NAME = re.compile(r"job-([0-9a-f]{16})\.parquet")
-# The names a footer may give its fields and mesh files: plain names in fields/, never a path.
-FIELDS_NAME = re.compile(r"[0-9a-f]{16}\.h5")
-MESH_NAME = re.compile(r"mesh-[0-9a-f]{16}\.h5")
 
 
 class FilesDamaged(StoreError):
@@ -120,6 +123,7 @@ def result_schema() -> pa.Schema:
         pa.field("failure_detail", pa.string()),
     ]
     fields += [pa.field(k, t) for k, t in STAGE_FIELDS.items()]
+    fields += [pa.field(k, t) for k, t in DIAGNOSTIC_FIELDS.items()]
     fields += [pa.field(k, t) for k, t in _JOB_FIELDS.items()]
     return pa.schema(fields)
 
@@ -150,7 +154,7 @@ def read_footer(path: Path) -> dict[str, Any] | None:
     """The footer record alone (cheap: the Parquet footer), or None if it cannot be read."""
     try:
         raw = (pq.read_schema(path).metadata or {}).get(META_KEY)
-        meta = json.loads(raw)
+        meta = json.loads(raw)  # type: ignore[arg-type]  # None raises TypeError: caught below
     except Exception:  # noqa: BLE001 - damaged files are the full validator's to name
         return None
     return meta if isinstance(meta, dict) else None
@@ -190,7 +194,7 @@ def validate_result_file(
         raise StoreError(f"{path}: corrupt result file (columns differ from the result schema)")
     raw = (table.schema.metadata or {}).get(META_KEY)
     try:
-        meta = json.loads(raw)
+        meta = json.loads(raw)  # type: ignore[arg-type]  # None raises TypeError: caught below
         lo, hi = (int(s) for s in meta["stages"])
         if not isinstance(meta.get("sha256"), str):
             raise TypeError
@@ -223,14 +227,15 @@ def check_files(
     """`FilesDamaged` unless the fields and mesh files of result ``path`` (footer ``meta``)
     exist with the recorded size and, with ``verify``, the recorded sha256."""
     ff, mf = store_file_names(meta)  # validated with the footer: plain names only
+    fields_dir = RunLayout(run_dir).fields_dir
     if ff:
-        fpath = run_dir / "fields" / ff
+        fpath = fields_dir / ff
         if not fpath.is_file() or fpath.stat().st_size != meta.get("fields_bytes"):
             raise FilesDamaged(f"{path}: its fields file {fpath} is missing or truncated")
         if verify and file_sha256(fpath, memo) != meta.get("fields_sha256"):
             raise FilesDamaged(f"{path}: its fields file {fpath} is damaged (sha256 differs)")
     if mf:
-        mpath = run_dir / "fields" / mf
+        mpath = fields_dir / mf
         if not mpath.is_file():
             raise FilesDamaged(f"{path}: its mesh file {mpath} is missing")
         if verify and file_sha256(mpath, memo) != meta.get("mesh_sha256"):
@@ -277,7 +282,7 @@ def check_result(
 
 def result_files(run_dir: Path) -> tuple[dict[str, Path], list[Path]]:
     """The store's result files by job id, and the stray files of ``results/`` (ignored)."""
-    results_dir = run_dir / "results"
+    results_dir = RunLayout(run_dir).results_dir
     found: dict[str, Path] = {}
     stray: list[Path] = []
     if results_dir.is_dir():
@@ -301,11 +306,14 @@ class StoreScan(NamedTuple):
         return sum(c.state == state for c in self.checks.values())
 
 
-def scan_store(run_dir: str | Path, *, verify_files: bool = True) -> StoreScan:
+def scan_store(
+    run_dir: str | Path, *, verify_files: bool = True, run: Run | None = None
+) -> StoreScan:
     """Check every result file of the run's manifest jobs (checksums of the fields and mesh
-    files too, unless ``verify_files`` is false); moves nothing."""
+    files too, unless ``verify_files`` is false); moves nothing. ``run`` is the run directory
+    already loaded (`load_run`), if the caller has it."""
     rd = Path(run_dir)
-    run = load_run(rd)
+    run = run if run is not None else load_run(rd)
     expected = fingerprints(run.sweep, run.manifest)
     files, stray = result_files(rd)
     memo: dict = {}
@@ -324,19 +332,24 @@ def _frame(tables: list[pa.Table]) -> pd.DataFrame:
     return pa.concat_tables([t.replace_schema_metadata(None) for t in tables]).to_pandas()
 
 
-def read_results(run_dir: str | Path, job_ids: Iterable[str] | None = None) -> pd.DataFrame:
+def read_results(
+    run_dir: str | Path, job_ids: Iterable[str] | None = None, *, run: Run | None = None
+) -> pd.DataFrame:
     """The current result rows of a run, one per job and stage (an empty frame if none).
 
     Every file is validated (page checksums, footer record, schema, fields file size); a bad
     one raises ``StoreError`` naming it, on one line, with the fix. Results of manifest jobs
     computed with other settings (stale) are left out; so are stray files in ``results/``.
     Jobs not in the manifest (orphans of an earlier sweep) are returned: callers filter them.
+    ``run`` is the run directory already loaded (`load_run`), if the caller has it; without
+    it the directory's sweep and manifest are read, if it has them.
     """
     run_dir = Path(run_dir)
     files, _ = result_files(run_dir)
     expected: Mapping[str, str] = {}
-    if (run_dir / "manifest.parquet").is_file() and (run_dir / "sweep.yaml").is_file():
+    if run is None and RunLayout(run_dir).is_run():
         run = load_run(run_dir)
+    if run is not None:
         expected = fingerprints(run.sweep, run.manifest)
     if job_ids is not None:
         wanted = set(job_ids)
@@ -363,3 +376,12 @@ def scan_results(scan: StoreScan) -> pd.DataFrame:
     return _frame(
         [c.meta["_table"] for c in scan.checks.values() if c.state == ResultState.DONE and c.meta]
     )
+
+
+def rows_element_degree(rows: pd.DataFrame) -> int | None:
+    """The element degree of result ``rows`` (None without rows); StoreError if they mix
+    elements."""
+    degrees = sorted({int(d) for d in rows["element_degree"].dropna()})
+    if len(degrees) > 1:
+        raise StoreError(f"the result rows mix element degrees {degrees}")
+    return degrees[0] if degrees else None

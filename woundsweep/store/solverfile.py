@@ -23,7 +23,7 @@ from .. import __version__
 from ..core.diagnostics import StageReport
 from ..core.errors import StoreError
 from ..core.fsutil import atomic_write
-from ..core.schema import UNITS, StageStatus
+from ..core.schema import UNITS, MeshData, StageStatus
 
 __all__ = [
     "CLOSURE_LINE_DATASETS",
@@ -86,7 +86,7 @@ class SolverOutput(NamedTuple):
 def write_solver_file(
     path: str | Path,
     attrs: Mapping[str, Any],
-    mesh: Any,
+    mesh: MeshData,
     reports: Sequence[StageReport],
     fields: Mapping[int, tuple[np.ndarray, np.ndarray]],
     extra: Mapping[int, Mapping[str, np.ndarray]] | None = None,

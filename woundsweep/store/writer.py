@@ -1,29 +1,22 @@
-"""The result store under RUN_DIR: one Parquet file per job, HDF5 fields, crash-safe writes.
-
-Layout::
-
-    RUN_DIR/results/job-<job_id>.parquet   one row per requested stage of the job (all classes)
-    RUN_DIR/fields/<job_id>.h5              displacement and cellwise von Mises per stored stage
-    RUN_DIR/fields/mesh-<geometry_id>.h5    the mesh, once per geometry
-    RUN_DIR/logs/job-<job_id>.log           the job's stdout/stderr, one header per attempt
-    RUN_DIR/tmp/                            solver outputs in flight (host and runner pid named)
-    RUN_DIR/corrupt/                        result files that failed validation, moved aside
+"""Writing a job's result to the store crash-safely: its HDF5 fields, then its Parquet rows.
 
 Crash safety: every file is written to a temporary name (a dot file in the same directory,
 which pyarrow ignores), flushed, fsynced and moved into place with ``os.replace``; a reader
 sees the old file or the whole new one. The fields of a job are written before its Parquet
-file, so "Parquet file present and valid" means the job is complete, fields included: that
-is the resume rule. A job owns exactly one Parquet file, so a rerun or two shards racing on
-one job replace it and never duplicate rows; ``pandas.read_parquet("RUN_DIR/results")`` reads
-the whole store. Failed jobs get rows too (status ``not-run`` for stages without a result),
-so counts by ``failure_class`` come straight from the store.
+file, so "Parquet file present and valid" means the job is complete, fields included (the
+resume rule, `woundsweep.store.triage`). A job owns exactly one Parquet file, so a rerun or
+two shards racing on one job replace it and never duplicate rows;
+``pandas.read_parquet("RUN_DIR/results")`` reads the whole store. Failed jobs get rows too
+(status ``not-run`` for stages without a result), so counts by ``failure_class`` come
+straight from the store. Each row carries its stage's diagnostics, one typed column each
+(`woundsweep.core.diagnostics`), and the job's ``element_degree``.
 
 Parquet files carry page checksums and a footer record that resume validation checks
 (`woundsweep.store.reader`, which also holds `read_results`, the validated reader): the
 result's fingerprint (`woundsweep.store.identity`; another one means stale: redone) and the
 sha256 of its fields and mesh files (another one means damaged: the files go to corrupt/ and
 the job is redone). HDF5 datasets are float32 (coordinates float64), gzip-compressed with
-Fletcher-32 checksums.
+Fletcher-32 checksums. Where the files go: `woundsweep.store.paths`.
 """
 
 from __future__ import annotations
@@ -31,10 +24,7 @@ from __future__ import annotations
 import datetime as _dt
 import hashlib
 import json
-import os
-import socket
 import sys
-import time
 from pathlib import Path
 from typing import Any, NamedTuple
 
@@ -43,23 +33,17 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from .. import __version__
-from ..config.manifest import JobRow, load_run
-from ..config.sweep import MANIFEST_COLUMNS, Sweep, load_sweep
+from ..config.geometry import GeometrySpec
+from ..config.manifest import JobRow, job_geometry
+from ..config.sweep import MANIFEST_COLUMNS
 from ..core.diagnostics import StageReport
-from ..core.errors import StoreError
 from ..core.fsutil import atomic_write
-from ..core.schema import FailureClass, ResultState, StageResult, StageStatus
+from ..core.schema import FailureClass, StageResult, StageStatus
 from ..core.versions import RESULT_FORMAT_VERSION
-from .identity import file_sha256, fingerprints, result_fingerprint
-from .reader import (
-    META_KEY,
-    check_result,
-    content_digest,
-    read_footer,
-    result_schema,
-    store_file_names,
-)
+from .identity import file_sha256
+from .reader import META_KEY, content_digest, result_schema
 from .solverfile import MESH_DATASETS, MESH_GROUP, SolverOutput, stage_group, stage_of_group
+from .triage import JobState, StoreTriage
 
 __all__ = [
     "FIELDS_CHOICES",
@@ -86,14 +70,6 @@ class AttemptOutcome(NamedTuple):
     started_at: float
     finished_at: float
     output: SolverOutput | None
-
-
-class JobState(NamedTuple):
-    """Resume bookkeeping for one job: its `ResultState`, stored failure class and why."""
-
-    state: ResultState
-    failure_class: str | None = None
-    reason: str = ""
 
 
 def _float_or_none(value: Any) -> float | None:
@@ -132,141 +108,15 @@ def _mesh_digest(mesh: Any) -> str:
     return h.hexdigest()
 
 
-class Store:
-    """Paths, atomic writes and resume validation for one run directory."""
-
-    def __init__(self, run_dir: str | Path, sweep: Sweep | None = None) -> None:
-        self.run_dir = Path(run_dir)
-        self._sweep = sweep
-        self._expected: dict[str, str] | None = None
-        self._memo: dict = {}
-        self.results_dir = self.run_dir / "results"
-        self.fields_dir = self.run_dir / "fields"
-        self.logs_dir = self.run_dir / "logs"
-        self.tmp_dir = self.run_dir / "tmp"
-        self.corrupt_dir = self.run_dir / "corrupt"
-        self.host = socket.gethostname()
-
-    def ensure_dirs(self) -> None:
-        dirs = (self.results_dir, self.fields_dir, self.logs_dir, self.tmp_dir)
-        for d in dirs:  # all checked before any is made: a refused run changes nothing
-            if d.exists() and not d.is_dir():
-                raise StoreError(f"{d}: exists and is not a directory (move it away)")
-        for d in dirs:
-            d.mkdir(parents=True, exist_ok=True)
-
-    def result_path(self, job_id: str) -> Path:
-        return self.results_dir / f"job-{job_id}.parquet"
-
-    def log_path(self, job_id: str) -> Path:
-        return self.logs_dir / f"job-{job_id}.log"
-
-    def tmp_path(self, job_id: str, attempt: int, suffix: str = ".h5") -> Path:
-        """A per-attempt temporary file named after this host and runner pid (see clean_tmp)."""
-        return self.tmp_dir / f"{job_id}~{self.host}~{os.getpid()}~{attempt}{suffix}"
-
-    @property
-    def sweep(self) -> Sweep:
-        """The run's sweep (its settings make the results' fingerprints)."""
-        if self._sweep is None:
-            self._sweep = load_sweep(self.run_dir / "sweep.yaml")
-        return self._sweep
-
-    def fingerprint(self, job: JobRow) -> str:
-        return result_fingerprint(self.sweep, job)
-
-    # ---- resume bookkeeping -------------------------------------------------------------
-    def job_state(
-        self, job_id: str, stages: tuple[int, int], fingerprint: str | None = None
-    ) -> JobState:
-        """Is the job's result present, valid, current, with intact files, covering ``stages``?
-
-        ``fingerprint`` defaults to the one the run's manifest and sweep give the job.
-        """
-        path = self.result_path(job_id)
-        if not path.exists():
-            return JobState(ResultState.MISSING)
-        if fingerprint is None:
-            if self._expected is None:
-                run = load_run(self.run_dir)
-                self._expected = fingerprints(run.sweep, run.manifest)
-            fingerprint = self._expected.get(job_id)
-        chk = check_result(path, job_id, self.run_dir, fingerprint, memo=self._memo)
-        meta = chk.meta or {}
-        if chk.state != ResultState.DONE:
-            return JobState(chk.state, meta.get("failure_class"), chk.reason)
-        lo, hi = meta["stages"]
-        if lo > stages[0] or hi < stages[1]:
-            return JobState(ResultState.STALE, meta["failure_class"], f"has stages {lo}-{hi}")
-        return JobState(ResultState.DONE, meta["failure_class"])
-
-    def quarantine(self, job_id: str, files: bool = False) -> Path | None:
-        """Move a result file that failed validation to RUN_DIR/corrupt/ (kept for inspection).
-
-        With ``files`` its fields file and a mesh file whose checksum differs go there too.
-        """
-        src = self.result_path(job_id)
-        self.corrupt_dir.mkdir(parents=True, exist_ok=True)
-        stamp = int(time.time())
-        if files:
-            meta = read_footer(src) or {}  # a damaged footer names no files to move
-            try:  # only the store's own plain names: a crafted footer moves nothing outside
-                names = store_file_names(meta, job_id)
-            except StoreError:
-                names = ("", "")
-            for name, key in zip(names, ("fields_sha256", "mesh_sha256")):
-                f = self.fields_dir / name
-                if name and f.is_file():
-                    if key == "mesh_sha256" and file_sha256(f) == meta.get(key):
-                        continue  # the geometry's mesh is intact: other jobs use it
-                    os.replace(f, self.corrupt_dir / f"{f.name}.{stamp}")
-        dst = self.corrupt_dir / f"{src.name}.{stamp}"
-        try:
-            os.replace(src, dst)
-        except FileNotFoundError:
-            return None
-        return dst
-
-    def clean_tmp(self, max_age_s: float = 86400.0) -> int:
-        """Remove temporaries of dead runners on this host, and any older than ``max_age_s``.
-
-        Other shards (other pids, other hosts) may be writing their own at this moment.
-        """
-        removed = 0
-        now = time.time()
-        candidates: list[Path] = []
-        if self.tmp_dir.is_dir():
-            candidates += list(self.tmp_dir.iterdir())
-        for d in (self.results_dir, self.fields_dir):
-            if d.is_dir():
-                candidates += [p for p in d.iterdir() if p.name.startswith(".")]
-        for p in candidates:
-            parts = p.name.split("~")
-            dead = False
-            if len(parts) >= 4 and parts[1] == self.host:
-                try:
-                    os.kill(int(parts[2]), 0)
-                except ProcessLookupError:
-                    dead = True
-                except (ValueError, PermissionError):
-                    pass
-            try:
-                old = now - p.stat().st_mtime > max_age_s
-            except FileNotFoundError:
-                continue
-            if dead or old:
-                try:
-                    p.unlink()
-                    removed += 1
-                except (FileNotFoundError, IsADirectoryError):
-                    pass
-        return removed
+class Store(StoreTriage):
+    """One run directory's store: its paths (`StorePaths`), resume triage (`StoreTriage`)
+    and the atomic writing of a job's result."""
 
     # ---- writing ------------------------------------------------------------------------
     def _write_fields(
-        self, out: SolverOutput, job_id: str, geometry_id: str, fields: str
+        self, out: SolverOutput, job_id: str, spec: GeometrySpec, fields: str
     ) -> tuple[str, int, str]:
-        """Write the job's HDF5 fields (and the geometry's mesh once); returns names and size.
+        """Write the job's HDF5 fields (and the mesh of ``spec`` once); returns names and size.
 
         A mesh file that does not open is replaced (its jobs' checksums then differ: redone).
         """
@@ -282,17 +132,16 @@ class Store:
             embed_mesh = False
             if MESH_GROUP in src:
                 digest = _mesh_digest(src[MESH_GROUP])
-                mesh_path = self.fields_dir / f"mesh-{geometry_id}.h5"
+                mesh_path = self.layout.mesh_file(spec.mesh_id)
                 existing = _mesh_file_digest(mesh_path)
                 if existing is None:
                     atomic_write(
-                        mesh_path,
-                        lambda tmp: _write_mesh(tmp, src[MESH_GROUP], digest, geometry_id),
+                        mesh_path, lambda tmp: _write_mesh(tmp, src[MESH_GROUP], digest, spec)
                     )
                     existing = digest
                 if existing == digest:
                     mesh_name = mesh_path.name
-                else:  # a job whose mesh differs from the geometry's stored one keeps its own
+                else:  # a job whose mesh differs from the stored one of its id keeps its own
                     embed_mesh = True
 
             def write(tmp: str) -> None:
@@ -306,12 +155,12 @@ class Store:
                         g = dst.create_group(MESH_GROUP)
                         for name, ds in src[MESH_GROUP].items():
                             _copy_dataset(ds, g, name)
-                    for k in keep:
-                        g = dst.create_group(stage_group(k))
-                        for name, ds in src[stage_group(k)].items():
+                    for stage in keep:
+                        g = dst.create_group(stage_group(stage))
+                        for name, ds in src[stage_group(stage)].items():
                             _copy_dataset(ds, g, name)
 
-            path = self.fields_dir / f"{job_id}.h5"
+            path = self.layout.fields_file(job_id)
             atomic_write(path, write)
         return path.name, path.stat().st_size, mesh_name
 
@@ -333,7 +182,7 @@ class Store:
         out = outcome.output
         if out is not None and fields != "none":
             fields_file, fields_bytes, mesh_file = self._write_fields(
-                out, job_id, str(job["geometry_id"]), fields
+                out, job_id, job_geometry(self.sweep, job), fields
             )
         failed_stage = None
         if outcome.failure_class == FailureClass.NOT_CONVERGED and out is not None:
@@ -342,7 +191,7 @@ class Store:
         attrs = out.attrs if out is not None else {}
         base: dict[str, Any] = {}
         for name in MANIFEST_COLUMNS:
-            v = job[name]
+            v = job[name]  # type: ignore[literal-required]  # the manifest columns: JobRow keys
             base[name] = v.item() if isinstance(v, np.generic) else v
         common = {
             "failure_class": outcome.failure_class,
@@ -371,6 +220,7 @@ class Store:
             "fields_file_sha256": self._sha(fields_file),
             "mesh_file_sha256": self._sha(mesh_file),
         }
+        degree = int(self.sweep.solver.element_degree)  # the job's, where the solver gave none
         rows = []
         for k in range(stages[0], stages[1] + 1):
             report = out.stages.get(k) if out is not None else None
@@ -379,7 +229,9 @@ class Store:
             row = dict(base)
             row.update(report.result._asdict())
             row["stage"] = k
-            row["stage_extra_json"] = report.diagnostics_json()
+            if row["element_degree"] is None:
+                row["element_degree"] = degree
+            row.update(report.diagnostic_columns())
             row.update(common)
             rows.append(row)
         table = pa.Table.from_pylist(rows, schema=result_schema())
@@ -403,11 +255,12 @@ class Store:
         return path
 
 
-def _write_mesh(tmp: str, mesh: Any, digest: str, geometry_id: str) -> None:
+def _write_mesh(tmp: str, mesh: Any, digest: str, spec: GeometrySpec) -> None:
     import h5py
 
     with h5py.File(tmp, "w") as dst:
-        dst.attrs["geometry_id"] = geometry_id
+        dst.attrs["mesh_id"] = spec.mesh_id
+        dst.attrs["element_degree"] = spec.element_degree
         dst.attrs["mesh_sha256"] = digest
         g = dst.create_group(MESH_GROUP)
         for name, ds in mesh.items():

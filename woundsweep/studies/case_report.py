@@ -160,9 +160,11 @@ def _figures(result: CaseResult, out: Path) -> list[str]:
     fig = Figure(figsize=(7, 8), layout="constrained")
     a1, a2, a3 = fig.subplots(3, 1, sharex=True)
     a1.plot(st.gap_y_mm, st.gap_mm, "k.-", label="sutured")
-    for j, s in enumerate(result.itch, 1):
-        if s.state is not None:
-            a1.plot(s.state.gap_y_mm, s.state.gap_mm, ".-", lw=0.8, label=f"load {j}/{ITCH_STEPS}")
+    for j, step in enumerate(result.itch, 1):
+        if step.state is not None:
+            a1.plot(
+                step.state.gap_y_mm, step.state.gap_mm, ".-", lw=0.8, label=f"load {j}/{ITCH_STEPS}"
+            )
     a1.axhline(CLOSED_MAX_PER_W * st.closure.width_mm, color="r", ls=":", lw=0.8)
     a1.set_ylabel("surface gap (mm)")
     a1.legend(fontsize=7)

@@ -12,8 +12,8 @@ a level is (f - f_ext) / f_ext, f_ext the finest triple's extrapolation. With fo
 levels each quantity is also fitted over all of them by least squares (`gci.fit_study`: order,
 limit f0, scatter and each level's uncertainty U), with deviations (f - f0) / f0: meshes that
 are not nested scatter about the error's law, which a triple cannot tell from oscillation.
-The gmsh meshes are cached under ``RUN_DIR/convergence/meshes/`` (ids: the hash of their
-`GeometrySpec`); the study is written to ``RUN_DIR/convergence/job_<N>.json`` and drawn in
+The gmsh meshes are cached under ``RUN_DIR/convergence/meshes/`` (named by their
+`GeometrySpec.mesh_id`); the study is written to ``RUN_DIR/convergence/job_<N>.json`` and drawn in
 ``job_<N>.png`` (``job_<N>_refined.*`` for refinements).
 """
 
@@ -24,7 +24,7 @@ import json
 import math
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from ..config.geometry import FINEST_FACTOR
 from ..core.errors import WoundsweepError
@@ -32,6 +32,9 @@ from ..core.fsutil import atomic_write_bytes
 from ..core.schema import StageStatus
 from .figure import draw_study
 from .gci import SAFETY_FACTOR, fit_study, grid_studies
+
+if TYPE_CHECKING:
+    from ..physics.job import StageRecord
 
 __all__ = [
     "QUANTITIES",
@@ -117,12 +120,12 @@ def parse_factors(text: str, minimum: int = 3) -> list[float]:
     return factors
 
 
-def _stage_values(rec: Any) -> dict[str, Any]:
+def _stage_values(rec: StageRecord) -> dict[str, Any]:
     r = rec.result
     ok = r.status == StageStatus.CONVERGED
     row = {"status": str(r.status), "cells": r.cells, "dofs": r.dofs, "time_s": r.time_s}
     for q in QUANTITIES:
-        v = getattr(r, q, None) if q in r._fields else rec.extra.get(q)
+        v: Any = getattr(r, q, None) if q in r._fields else rec.diagnostics.get(q)
         row[q] = float(v) if ok and v is not None and math.isfinite(v) else None
     return row
 
@@ -144,7 +147,7 @@ def convergence_study(
     with ``refinements`` K they are instead the mesh at the job's factor (or the single one
     of ``factors``) and its uniform refinements 1..K (`woundsweep.mesh.refine`).
     """
-    from ..config.manifest import canonical_hash, load_run
+    from ..config.manifest import load_run
     from ..mesh.cache import get_mesh
     from ..mesh.refine import refine_uniform
     from ..mesh.sizing import size_scale
@@ -160,14 +163,15 @@ def convergence_study(
     else:
         factors = factors or level_factors(base.mesh_size_factor, levels, ratio)
         plan = [(m, 0) for m in factors]
-    out_dir = run.run_dir / "convergence"
+    out_dir = run.layout.convergence_dir
     level_rows = []
     mesh = None
     for k, (m, times) in enumerate(plan):
         spec = dataclasses.replace(base, mesh_size_factor=m)
         if times == 0:
-            mesh = get_mesh(out_dir, canonical_hash(spec.to_dict()), spec).mesh
+            mesh = get_mesh(out_dir, spec).mesh
         else:
+            assert mesh is not None  # the plan starts at an unrefined level (times 0)
             mesh = refine_uniform(mesh)
         how = f", refinement {times}" if times else ""
         say(f"level {k}: mesh size factor {m:.4g}{how}, {mesh.info['cells']} cells")
@@ -218,7 +222,10 @@ def analyse_levels(level_rows: list[dict[str, Any]]) -> dict[str, Any]:
     fits: dict[str, dict[str, dict[str, Any]]] = {}
     fit_deviations: dict[str, dict[str, list[float | None]]] = {}
     for stage in level_rows[0]["stages"]:
-        per_q, dev_q, fit_q, fit_dev_q = {}, {}, {}, {}
+        per_q: dict[str, list[dict[str, Any]]] = {}
+        dev_q: dict[str, list[float | None]] = {}
+        fit_q: dict[str, dict[str, Any]] = {}
+        fit_dev_q: dict[str, list[float | None]] = {}
         for q in QUANTITIES:
             values = [lv["stages"][stage][q] for lv in level_rows]
             if all(v is None for v in values):

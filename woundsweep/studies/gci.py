@@ -245,17 +245,17 @@ def fit_study(values: Sequence[float], sizes: Sequence[float]) -> FitStudy:
             c, r = _linear_fit([ones, [x**q for x in t]], f)
             sigma = math.sqrt(r / (n - 2))
 
-            def model(x: float, c: list[float] = c, q: int = q) -> float:
+            def order_model(x: float, c: list[float] = c, q: int = q) -> float:
                 return c[0] + c[1] * x**q
 
-            fits.append((sigma, f"order {q}", FIT_SAFETY_FACTOR, model))
+            fits.append((sigma, f"order {q}", FIT_SAFETY_FACTOR, order_model))
     sigma, name, fs, model = min(fits, key=lambda item: item[0])
     limit = model(0.0)
     scattered = sigma >= data_range
-    u = []
+    unc: list[float] = []
     for x, v in zip(t, f):
         e, dev = abs(model(x) - limit), abs(v - model(x))
-        u.append(
+        unc.append(
             fs * e + sigma + dev if not scattered else 3 * sigma / data_range * (e + sigma + dev)
         )
-    return FitStudy("monotone", name, p, limit, sigma, scattered, fs, tuple(u))
+    return FitStudy("monotone", name, p, limit, sigma, scattered, fs, tuple(unc))

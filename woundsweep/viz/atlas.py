@@ -23,7 +23,7 @@ import time
 from collections.abc import Callable
 from html import escape
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import Any, NamedTuple, cast
 
 import numpy as np
 import pandas as pd
@@ -32,7 +32,9 @@ from ..config.manifest import Run
 from ..config.solver import element_name
 from ..config.sweep import GEOMETRY_KEYS
 from ..core.errors import StoreError
+from ..core.layout import ANALYSIS_METRICS
 from ..core.schema import STAGES, StageStatus
+from ..store.reader import rows_element_degree
 from .html import asset, fmt, json_script, page, plotly_js
 from .jobdata import load_job
 from .view import job_body
@@ -54,7 +56,7 @@ _ASSETS = ("viewer.js", "index.js", "style.css")
 class AtlasSummary(NamedTuple):
     """What a build wrote: counts, bytes (all, of the views, of plotly.js) and seconds."""
 
-    index: Path
+    index: Path  # type: ignore[assignment]  # shadows tuple.index (never called on it)
     jobs: int
     views: int
     total_bytes: int
@@ -152,8 +154,9 @@ def _index_table(manifest: pd.DataFrame, results: pd.DataFrame, views: set[int])
         for k in STAGES:
             row.append(_cell(p99.at[j, k]) if j in p99.index and k in p99.columns else None)
         row.append(_cell(jobs.at[j, "failed_stage"]) if stored else None)
-        row.append(int(converged.at[j]) if stored else None)
-        row.append(int(reopened.at[j]) if stored else None)
+        # Counts (sums of booleans); `.at` is any Scalar to pandas-stubs.
+        row.append(int(cast(int, converged.at[j])) if stored else None)
+        row.append(int(cast(int, reopened.at[j])) if stored else None)
         row += [_cell(getattr(job, c)) for c in _INDEX_PARAMS]
         row.append("yes" if j in views else "")
         rows.append(row)
@@ -189,20 +192,20 @@ def _nav(idx: int, prev: int | None, nxt: int | None, has_analysis: bool) -> str
     return "<nav>" + "".join(links) + "</nav>\n"
 
 
-def _analysis(run_dir: Path, out: Path) -> int:
+def _analysis(run: Run, out: Path) -> int:
     """Copy the analysis' figures and render its report; bytes written (0 if none)."""
-    src = run_dir / "analysis"
+    src = run.layout.analysis_dir
     if not src.is_dir():
         return 0
     dst = out / "analysis"
     dst.mkdir(parents=True, exist_ok=True)
     total = 0
     figures = sorted(p for p in src.iterdir() if p.suffix in (".png", ".svg"))
-    for p in figures + sorted(src.glob("metrics.json")):
+    for p in figures + sorted(src.glob(ANALYSIS_METRICS)):
         shutil.copyfile(p, dst / p.name)
         total += p.stat().st_size
     body = '<nav><a href="../index.html">index</a></nav>\n'
-    report = src / "report.md"
+    report = run.layout.analysis_report
     if not report.exists():
         body += "<h1>Analysis</h1>\n"
     else:
@@ -244,7 +247,7 @@ def build_atlas(
     (out / "assets").mkdir(parents=True, exist_ok=True)
     total = sum(_write(out / "assets" / name, asset(name)) for name in _ASSETS)
     plotly_bytes = _write(out / "assets" / "plotly.min.js", plotly_js()) if views else 0
-    total += plotly_bytes + _analysis(run.run_dir, out)
+    total += plotly_bytes + _analysis(run, out)
     has_analysis = (out / "analysis" / "index.html").exists()
     man = run.manifest.sort_values(["geometry_id", "job_index"])
     order = sorted(int(j) for j in man["job_index"])
@@ -261,7 +264,8 @@ def build_atlas(
     }
     cache: dict[Any, Any] = {}
     drawn: set[int] = set()
-    element = element_name(run.sweep.solver.element_degree)
+    degree = rows_element_degree(results[results["job_id"].isin(set(run.manifest["job_id"]))])
+    element = element_name(degree) if degree is not None else ""
     head = '<script src="../assets/plotly.min.js"></script>\n'
     for n, job in enumerate(man.to_dict("records"), 1):
         j = int(job["job_index"])
@@ -278,7 +282,7 @@ def build_atlas(
             )
         elif j in views:
             jf = load_job(run, job, rows, cache)
-        footer = "<h2>Log</h2>\n" + log_html(run.run_dir / "logs" / f"job-{job['job_id']}.log")
+        footer = "<h2>Log</h2>\n" + log_html(run.layout.log_file(str(job["job_id"])))
         body = job_body(
             job, rows, jf, view_note=note, header=_nav(j, prev, nxt, has_analysis), footer=footer,
             element=element,
@@ -302,7 +306,9 @@ def build_atlas(
     data = _index_table(run.manifest, results, drawn)
     body = (
         f"<h1>woundsweep atlas <small>{escape(run.run_dir.name)} &middot; "
-        f"{len(order)} jobs &middot; element {escape(element)}</small></h1>\n"
+        f"{len(order)} jobs"
+        + (f" &middot; element {escape(element)}" if element else "")
+        + "</small></h1>\n"
         + (
             '<nav><a href="analysis/index.html">analysis: report and figures</a></nav>\n'
             if has_analysis

@@ -30,7 +30,7 @@ import numpy as np
 from ..core.schema import CELL_TAGS, FACET_TAGS, STAGE_NAMES, UNITS, WOUND_TAGS
 from .jobdata import JobFields
 from .mechanics import CellMechanics, cell_mechanics
-from .surface import surface_of
+from .surface import ExteriorSurface, surface_of
 from .vtkfiles import pvd, vtm, write_text, write_vtu
 
 __all__ = ["SURFACE_FIELDS", "VOLUME_FIELDS", "export_job", "job_dir_name"]
@@ -96,7 +96,9 @@ def _normals(jf: JobFields, owner: np.ndarray, u: np.ndarray) -> np.ndarray:
     return n / np.linalg.norm(n, axis=1)[:, None]
 
 
-def _surface_fields(jf: JobFields, owner: np.ndarray, cell: dict[str, np.ndarray], u: np.ndarray):  # type: ignore[no-untyped-def]
+def _surface_fields(
+    jf: JobFields, owner: np.ndarray, cell: dict[str, np.ndarray], u: np.ndarray
+) -> dict[str, np.ndarray]:
     out = {k: v[owner] for k, v in cell.items()}
     n = _normals(jf, owner, u)
     snn = np.einsum("ti,tij,tj->t", n, cell["cauchy_stress_kPa"][owner].astype(float), n)
@@ -108,7 +110,7 @@ def _surface_fields(jf: JobFields, owner: np.ndarray, cell: dict[str, np.ndarray
     return out
 
 
-def _write_stage(jf: JobFields, d: Path, name: str, k: int, surf: Any) -> str:
+def _write_stage(jf: JobFields, d: Path, name: str, k: int, surf: ExteriorSurface) -> str:
     u, vm = jf.fields[k]
     cell = _cell_fields(_mechanics(jf, k), vm, jf.cell_tags)
     vol, srf = f"{name}_stage{k}_volume.vtu", f"{name}_stage{k}_surface.vtu"

@@ -92,7 +92,10 @@ def json_script(element_id: str, data: Any) -> str:
 
 def asset(name: str) -> str:
     """The text of a packaged asset (``woundsweep/viz/assets/<name>``)."""
-    return resources.files("woundsweep.viz").joinpath("assets", name).read_text("utf-8")
+    # Traversable.joinpath takes several parts from Python 3.11 on (typeshed's 3.10 stub: one);
+    # on 3.10 files() of a package directory is a pathlib.Path, which takes several too.
+    files = resources.files("woundsweep.viz")
+    return files.joinpath("assets", name).read_text("utf-8")  # type: ignore[call-arg]
 
 
 def plotly_js() -> str:

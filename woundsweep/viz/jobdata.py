@@ -1,18 +1,18 @@
 """One stored job as the viewers need it: mesh with tags, stored stages' fields, result rows.
 
 The store keeps the fields of a job in ``fields/<job_id>.h5`` (the stages `run --fields`
-kept) and its mesh once per geometry in ``fields/mesh-<geometry_id>.h5`` (points, cells, cell
-tags); the facets and facet tags come from the mesh cache ``meshes/<geometry_id>.npz``
-(rebuilt by gmsh if it is missing, and then checked against the stored mesh), which is also
-the mesh of a job without stored fields. Every stage of
-the job's rows gets a `StageNote` saying whether it has a field and, if not, why.
+kept) and the mesh its geometry's jobs share in ``fields/mesh-<mesh_id>.h5`` (points, cells,
+cell tags; `GeometrySpec.mesh_id`); the facets and facet tags come from the mesh cache
+``meshes/<mesh_id>.npz`` (rebuilt by gmsh if it is missing, and then checked against the
+stored mesh), which is also the mesh of a job without stored fields. Every stage of the job's
+rows gets a `StageNote` saying whether it has a field and, if not, why.
 """
 
 from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import TYPE_CHECKING, Any, NamedTuple, cast
 
 import numpy as np
 import pandas as pd
@@ -20,6 +20,7 @@ import pandas as pd
 from ..config.manifest import JobRow, Run
 from ..config.paper import Materials
 from ..core.errors import StoreError
+from ..core.layout import RunLayout
 from ..core.schema import PROFILE_LINES, FailureClass, StageStatus
 from ..store.reader import store_file_names
 from ..store.solverfile import (
@@ -30,6 +31,9 @@ from ..store.solverfile import (
     stage_group,
 )
 from .surface import closure_zone_facets
+
+if TYPE_CHECKING:
+    from ..mesh.cache import CachedMesh
 
 __all__ = [
     "JobFields",
@@ -66,17 +70,27 @@ class JobFields(NamedTuple):
     fields: dict[int, tuple[np.ndarray, np.ndarray]]  # stage -> (displacement_mm, von_mises_kPa)
     notes: list[StageNote]
     materials: Materials | None = None  # the run's materials (the derived stresses need them)
-    profiles: dict[int, dict[str, np.ndarray]] = {}  # stage -> line name -> (points, 3) + values
+    # stage -> line name -> {points_mm (points, 3), von_mises_kPa (points,)}
+    profiles: dict[int, dict[str, dict[str, np.ndarray]]] = {}
     # stage -> `CLOSURE_LINE_DATASETS` name -> (k,): the line loads along the wound
     closure_lines: dict[int, dict[str, np.ndarray]] = {}
     source: str = ""  # the file the fields came from
-    element_degree: int = 0  # the run's element (1: P1, 2: P2; 0 unknown)
+
+    @property
+    def element_degree(self) -> int | None:
+        """The element the job's rows were computed with (None if they do not say)."""
+        degrees = {int(r["element_degree"]) for r in self.rows if _given(r.get("element_degree"))}
+        return degrees.pop() if len(degrees) == 1 else None
+
+
+def _given(value: Any) -> bool:
+    return value is not None and not pd.isna(value)
 
 
 def records(rows: pd.DataFrame | list[dict[str, Any]]) -> list[dict[str, Any]]:
     """A job's result rows as dicts sorted by stage (pandas rows are slow one by one)."""
     if isinstance(rows, pd.DataFrame):
-        rows = rows.to_dict("records")
+        rows = cast("list[dict[str, Any]]", rows.to_dict("records"))  # str column names
     return sorted(rows, key=lambda r: int(r["stage"]))
 
 
@@ -128,7 +142,11 @@ def _mesh_arrays(run: Run, job: JobRow, groups: dict[str, Any], mesh_file: str):
         m = _cached_mesh(run, job).mesh
         return m.points, m.cells, m.cell_tags
     else:
-        path = run.run_dir / "fields" / (mesh_file or f"mesh-{job['geometry_id']}.h5")
+        path = (
+            run.layout.fields_dir / mesh_file
+            if mesh_file
+            else run.layout.mesh_file(run.geometry(job).mesh_id)
+        )
         if not path.exists():
             raise StoreError(f"{path}: the job's mesh file is missing")
         mesh = _read_h5(path)[1].get(MESH_GROUP)
@@ -144,10 +162,10 @@ def _mesh_arrays(run: Run, job: JobRow, groups: dict[str, Any], mesh_file: str):
         raise StoreError(f"the stored mesh of job {job['job_index']} lacks {err}") from None
 
 
-def _cached_mesh(run: Run, job: JobRow) -> Any:
+def _cached_mesh(run: Run, job: JobRow) -> CachedMesh:
     from ..mesh.cache import get_mesh
 
-    return get_mesh(run.run_dir, str(job["geometry_id"]), run.geometry(job))
+    return get_mesh(run.run_dir, run.geometry(job))
 
 
 def _boundary(run: Run, job: JobRow, points: np.ndarray, cells: np.ndarray):
@@ -175,11 +193,10 @@ def load_job(
     """Read the job's mesh and stored fields (the closure zone from the mesh's facet tags).
 
     ``run`` is the job's `grid.Run` (its sweep gives the meshes' closure zone and element
-    degree). ``rows`` are the job's validated result rows (`read_results`); a job without a fields
+    degree; the rows give the element the results were computed with). ``rows`` are the job's validated result rows (`read_results`); a job without a fields
     file (failed early, or ``run --fields none``) gets the mesh and no fields. ``cache`` (a
     dict the caller keeps) holds the last geometry's mesh for the next job of that geometry.
     """
-    run_dir = run.run_dir
     rows = records(rows)
     if not rows:
         raise StoreError(f"job {job['job_index']} has no stored result yet (run `woundsweep run`)")
@@ -189,7 +206,7 @@ def load_job(
     groups: dict[str, Any] = {}
     stored: list[int] = []
     if fields_file:
-        attrs, groups = _read_h5(run_dir / "fields" / fields_file)
+        attrs, groups = _read_h5(run.layout.fields_dir / fields_file)
         if attrs.get("job_id") != job["job_id"]:
             raise StoreError(f"fields/{fields_file}: holds job {attrs.get('job_id')!r}")
         stored = [int(k) for k in json.loads(attrs.get("stored_stages", "[]"))]
@@ -244,7 +261,6 @@ def _assemble(
         fields=fields,
         notes=stage_notes(rows, set(fields)),
         materials=run.sweep.materials,
-        element_degree=int(run.sweep.solver.element_degree),
         profiles=profiles,
         closure_lines=closure_lines,
         source=source,
@@ -287,7 +303,7 @@ def load_solver_file(run: Run, job: JobRow | None, path: str | Path) -> JobField
 
 def solve_output(run_dir: str | Path, job_index: int) -> Path:
     """Where ``woundsweep solve`` writes a job without ``--out``."""
-    return Path(run_dir) / "solve" / f"job_{int(job_index)}.h5"
+    return RunLayout(run_dir).solve_file(job_index)
 
 
 def open_job(
@@ -307,7 +323,8 @@ def open_job(
         return load_solver_file(run, job, result)
     if job is None:
         raise StoreError("give --job N or --result FILE.h5")
-    rows = read_results(run.run_dir, [str(job["job_id"])])
+    assert job_index is not None  # job is None without it
+    rows = read_results(run.run_dir, [str(job["job_id"])], run=run)
     if len(rows) == 0 and solve_output(run.run_dir, job_index).is_file():
         return load_solver_file(run, job, solve_output(run.run_dir, job_index))
     if len(rows) == 0:

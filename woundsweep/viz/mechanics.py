@@ -11,6 +11,7 @@ vertex displacement is the quadratic field's linear interpolant and these are it
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import NamedTuple
 
 import numpy as np
@@ -77,7 +78,7 @@ def _fung(p: FungParameters, orientation_deg: float, F: np.ndarray) -> np.ndarra
     return 0.5 * p.c_kPa * (np.exp(Q) - 1.0) + 0.5 * p.K_kPa * np.log(J) ** 2
 
 
-def first_piola(energy, F: np.ndarray) -> np.ndarray:  # type: ignore[no-untyped-def]
+def first_piola(energy: Callable[[np.ndarray], np.ndarray], F: np.ndarray) -> np.ndarray:
     """P = dW/dF (kPa) of a batched energy ``energy(F) -> (m,)`` by the complex step."""
     P = np.empty(F.shape)
     for i in range(3):

@@ -118,7 +118,7 @@ def view_data(jf: JobFields) -> dict[str, Any]:
         "z": _b64(ref[:, 2], "<f4"),
         "tri": _b64(s.triangles, "<i4"),
         "outline": _b64(zone_outline(s.triangles, s.zone), "<i4"),
-        "element": element_name(int(jf.element_degree)) if jf.element_degree else "",
+        "element": element_name(jf.element_degree) if jf.element_degree is not None else "",
         "cut": {
             "y_mm": y_mid,
             "x": _b64(jf.points[cut_nodes, 0], "<f4"),
@@ -166,7 +166,7 @@ def job_body(
     """A job's HTML: title (with the run's ``element``), the 3D view and the profile lines
     (with ``jf``) or ``view_note``, stages, parameters."""
     idx, fc = int(job["job_index"]), rows[0]["failure_class"] if rows else "not run"
-    if jf is not None and jf.element_degree:
+    if jf is not None and jf.element_degree is not None:
         element = element_name(jf.element_degree)
     elem = f" &middot; element {escape(element)}" if element else ""
     title = (

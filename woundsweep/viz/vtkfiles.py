@@ -6,7 +6,6 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
 from xml.sax.saxutils import quoteattr
 
 import numpy as np
@@ -96,6 +95,6 @@ def pvd(files: Sequence[tuple[int, str]]) -> str:
     return "\n".join(lines)
 
 
-def write_text(path: Path, text: str) -> Any:
+def write_text(path: Path, text: str) -> None:
     """A small text file, atomically."""
     atomic_write(path, lambda tmp: Path(tmp).write_text(text))

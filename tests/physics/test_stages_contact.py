@@ -10,6 +10,7 @@ so the flanks can only meet on that plane and no flank node may cross it.
 from __future__ import annotations
 
 import dataclasses
+import functools
 
 import numpy as np
 import pytest
@@ -40,23 +41,38 @@ def _energy_slope(m, u0: np.ndarray, v: np.ndarray, eps: float):
     return (e_plus - e_minus) / (2 * eps), R
 
 
-def _run(mesh, angle: float, skin: str = "stiff"):
+def _run(mesh, angle: float, skin: str = "stiff", solver: SolverSettings = P1):
     from woundsweep.physics.materials import JobMaterials
     from woundsweep.physics.model import WoundModel
     from woundsweep.physics.stages import run_stage
 
-    m = WoundModel(mesh, P1)
+    m = WoundModel(mesh, solver)
     m.set_materials(JobMaterials.table2(skin, angle))
     outs = [run_stage(m, k) for k in range(1, 7)]
     return m, outs
 
 
+@functools.cache
+def _p2_mesh(which: str):
+    """The fixtures' geometries meshed for P2 (the default element)."""
+    from woundsweep.config.geometry import GeometrySpec
+    from woundsweep.mesh.build import build_mesh
+
+    if which == "cylinder":
+        return build_mesh(GeometrySpec.cylindrical(1.0, 1.0, 4.0, 1.2, 0.0, 0.3))
+    return build_mesh(GeometrySpec.wedge(1.0, 1.0, 4.0, 1.2, 1.0, 0.3))
+
+
+@pytest.mark.parametrize("degree", [1, 2], ids=["P1", "P2"])
 @pytest.mark.parametrize("which", ["cylinder", "wedge"])
 def test_contact_stages_close_the_wound_without_overlap(
-    which, cylinder_mesh, deep_wedge_mesh
+    which, degree, cylinder_mesh, deep_wedge_mesh
 ) -> None:
-    mesh = cylinder_mesh if which == "cylinder" else deep_wedge_mesh
-    m, outs = _run(mesh, 0.0)
+    if degree == 1:
+        mesh = cylinder_mesh if which == "cylinder" else deep_wedge_mesh
+    else:
+        mesh = _p2_mesh(which)
+    m, outs = _run(mesh, 0.0, solver=SolverSettings(element_degree=degree))
     assert [o.solve.status for o in outs] == [CONVERGED] * 6
     d4, d5, d6 = (o.diagnostics for o in outs[3:])
     x = m.domain.X + m.u.reshape(-1, 3)
@@ -93,9 +109,11 @@ def test_contact_stages_close_the_wound_without_overlap(
     assert d6["contact_force_mN"] == pytest.approx(d4["contact_force_mN"], rel=0.02)
 
 
-def test_contact_at_45_degrees(deep_wedge_mesh) -> None:
+@pytest.mark.parametrize("degree", [1, 2], ids=["P1", "P2"])
+def test_contact_at_45_degrees(deep_wedge_mesh, degree) -> None:
     """Oblique fibres: the flanks are no mirror images, contact must still hold them apart."""
-    m, outs = _run(deep_wedge_mesh, 45.0, skin="stiff")
+    mesh = deep_wedge_mesh if degree == 1 else _p2_mesh("wedge")
+    m, outs = _run(mesh, 45.0, skin="stiff", solver=SolverSettings(element_degree=degree))
     assert [o.solve.status for o in outs] == [CONVERGED] * 6
     d6 = outs[5].diagnostics
     assert d6["max_penetration_rel"] < 0.01

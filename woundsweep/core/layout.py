@@ -41,6 +41,16 @@ ANALYSIS_METRICS = "metrics.json"
 ANALYSIS_REPORT = "report.md"
 
 
+class _Below:
+    """A fixed path below the run directory, read as an attribute of a `RunLayout`."""
+
+    def __init__(self, *parts: str) -> None:
+        self.parts = parts
+
+    def __get__(self, layout: RunLayout, owner: type | None = None) -> Path:
+        return layout.run_dir.joinpath(*self.parts)
+
+
 @dataclasses.dataclass(frozen=True)
 class RunLayout:
     """The paths of one run directory (nothing is read or made here)."""
@@ -54,47 +64,30 @@ class RunLayout:
     def __post_init__(self) -> None:  # a str is taken too
         object.__setattr__(self, "run_dir", Path(self.run_dir))
 
-    # ---- what `generate` writes ---------------------------------------------------------
-    @property
-    def sweep(self) -> Path:
-        return self.run_dir / "sweep.yaml"
-
-    @property
-    def manifest(self) -> Path:
-        return self.run_dir / "manifest.parquet"
-
-    @property
-    def provenance(self) -> Path:
-        return self.run_dir / "provenance.json"
-
-    @property
-    def lock(self) -> Path:
-        return self.run_dir / "run.lock"
+    # what `generate` writes, and the lock
+    sweep = _Below("sweep.yaml")
+    manifest = _Below("manifest.parquet")
+    provenance = _Below("provenance.json")
+    lock = _Below("run.lock")
+    # the result store
+    results_dir = _Below("results")
+    fields_dir = _Below("fields")
+    logs_dir = _Below("logs")
+    tmp_dir = _Below("tmp")
+    corrupt_dir = _Below("corrupt")
+    # caches and the commands' outputs
+    meshes_dir = _Below("meshes")
+    solve_dir = _Below("solve")
+    analysis_dir = _Below("analysis")
+    analysis_metrics = _Below("analysis", ANALYSIS_METRICS)
+    analysis_report = _Below("analysis", ANALYSIS_REPORT)
+    atlas_dir = _Below("atlas")
+    convergence_dir = _Below("convergence")
+    slurm_dir = _Below("slurm")
 
     def is_run(self) -> bool:
         """Whether the directory holds a sweep copy and a manifest (`generate` made it)."""
         return self.manifest.is_file() and self.sweep.is_file()
-
-    # ---- the result store ---------------------------------------------------------------
-    @property
-    def results_dir(self) -> Path:
-        return self.run_dir / "results"
-
-    @property
-    def fields_dir(self) -> Path:
-        return self.run_dir / "fields"
-
-    @property
-    def logs_dir(self) -> Path:
-        return self.run_dir / "logs"
-
-    @property
-    def tmp_dir(self) -> Path:
-        return self.run_dir / "tmp"
-
-    @property
-    def corrupt_dir(self) -> Path:
-        return self.run_dir / "corrupt"
 
     def result_file(self, job_id: str) -> Path:
         return self.results_dir / f"job-{job_id}.parquet"
@@ -109,45 +102,12 @@ class RunLayout:
     def log_file(self, job_id: str) -> Path:
         return self.logs_dir / f"job-{job_id}.log"
 
-    # ---- caches and the commands' outputs -----------------------------------------------
-    @property
-    def meshes_dir(self) -> Path:
-        return self.run_dir / "meshes"
-
     def mesh_cache_file(self, mesh_id: str) -> Path:
         return self.meshes_dir / f"{mesh_id}.npz"
-
-    @property
-    def solve_dir(self) -> Path:
-        return self.run_dir / "solve"
 
     def solve_file(self, job_index: int) -> Path:
         """Where `woundsweep solve` writes a job without ``--out``."""
         return self.solve_dir / f"job_{int(job_index)}.h5"
-
-    @property
-    def analysis_dir(self) -> Path:
-        return self.run_dir / "analysis"
-
-    @property
-    def analysis_metrics(self) -> Path:
-        return self.analysis_dir / ANALYSIS_METRICS
-
-    @property
-    def analysis_report(self) -> Path:
-        return self.analysis_dir / ANALYSIS_REPORT
-
-    @property
-    def atlas_dir(self) -> Path:
-        return self.run_dir / "atlas"
-
-    @property
-    def convergence_dir(self) -> Path:
-        return self.run_dir / "convergence"
-
-    @property
-    def slurm_dir(self) -> Path:
-        return self.run_dir / "slurm"
 
     @property
     def own_dirs(self) -> tuple[Path, ...]:

@@ -14,7 +14,7 @@ import numpy as np
 
 from ..config.paper import StageSettings
 from ..config.solver import NewtonSettings, SolverSettings
-from ..contact import GPA_TO_KPA, ContactModel, FlankContact, ZoneTie, split_wound_flanks
+from ..contact import GPA_TO_KPA, FlankContact, ZoneTie, split_wound_flanks
 from ..core.schema import DERMIS, SUBCUTIS, MeshData
 from ..solver.continuation import ContinuationResult
 from ..solver.newton import NewtonSolver
@@ -64,7 +64,7 @@ class WoundModel:
             raise ValueError("contact_penalty_GPa needs three values (stages 4, 5, 6)")
         self.contact_penalty_kPa = tuple(float(k) * GPA_TO_KPA for k in penalties)
         self.domain = d = WoundDomain(mesh_data, zone, solver.element_degree)
-        self.contact: ContactModel | None = None
+        self.contact: FlankContact | None = None
         self.tie: ZoneTie | None = None
         self.closure_line: ClosureLine | None = None
         self.flanks: tuple[np.ndarray, np.ndarray] | None = None
@@ -155,6 +155,13 @@ class WoundModel:
         self.u[:] = 0.0
         self.results.clear()
         self.displacements.clear()
+
+    def hold_closure_reactions(self, r: np.ndarray, rows: np.ndarray) -> None:
+        """Keep the residual ``r``'s reactions at ``rows`` (the Dirichlet closure's, flat dofs,
+        mN) as the closing load of the stages after it; zero elsewhere."""
+        forces = np.zeros_like(r)
+        forces[rows] = r[rows]
+        self.closing_forces = forces
 
     def record(self, outcome: StageOutcome) -> None:
         """Keep a stage's outcome and its end state (a later stage may start from it)."""

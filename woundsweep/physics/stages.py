@@ -142,8 +142,7 @@ def _closed_by_dirichlet(model: WoundModel) -> dict[str, float]:
     d = model.domain
     r = model.problem.residual_array()
     zone_rows = dof_rows(d.zone_nodes, 0)
-    model.closing_forces = np.zeros_like(r)
-    model.closing_forces[zone_rows] = r[zone_rows]
+    model.hold_closure_reactions(r, zone_rows)
     return {
         "closure_force_left_mN": float(r[dof_rows(d.zone_left_nodes, 0)].sum()),
         "closure_force_right_mN": float(r[dof_rows(d.zone_right_nodes, 0)].sum()),

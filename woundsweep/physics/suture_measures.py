@@ -14,13 +14,16 @@ and the surface von Mises, and at the apices the dog-ear height.
 
 from __future__ import annotations
 
-from typing import Any, NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
 from ..config.fusiform import Lens
 from .closure import ClosureMeasures
 from .profiles import locate_cells
+
+if TYPE_CHECKING:
+    from .model import WoundModel
 
 __all__ = [
     "EDGE_OFFSET_mm",
@@ -55,7 +58,7 @@ class SutureState(NamedTuple):
         return float(max(self.dog_ear_mm))
 
 
-def _dog_ears(model: Any, lens: Lens, u: np.ndarray) -> tuple[float, float]:
+def _dog_ears(model: WoundModel, lens: Lens, u: np.ndarray) -> tuple[float, float]:
     d = model.domain
     X = d.X
     top = np.flatnonzero(np.abs(X[:, 2] - d.z_top) <= 1e-9 * d.ell)
@@ -70,8 +73,9 @@ def _dog_ears(model: Any, lens: Lens, u: np.ndarray) -> tuple[float, float]:
     return out[0], out[1]
 
 
-def _pressure(model: Any) -> tuple[np.ndarray, np.ndarray]:
+def _pressure(model: WoundModel) -> tuple[np.ndarray, np.ndarray]:
     line = model.closure_line
+    assert line is not None, "a fusiform excision's model has a closure line"
     edges = line.edges
     centres = 0.5 * (edges[1:] + edges[:-1])
     c = model.contact
@@ -89,13 +93,14 @@ def _pressure(model: Any) -> tuple[np.ndarray, np.ndarray]:
 
 
 def measure_state(
-    model: Any, lens: Lens, suture_y_mm: np.ndarray, suture_force_mN: np.ndarray
+    model: WoundModel, lens: Lens, suture_y_mm: np.ndarray, suture_force_mN: np.ndarray
 ) -> SutureState:
     """The measures of ``model``'s current state (a `WoundModel` of a fusiform excision) with
     the sutures at ``suture_y_mm`` carrying ``suture_force_mN`` (empty before suturing)."""
     d = model.domain
     u = model.u
     line = model.closure_line
+    assert line is not None, "a fusiform excision's model has a closure line"
     m = line.measure(u)
     x = d.X[:, 0] + u.reshape(-1, 3)[:, 0]
     pairs = line.surface
@@ -134,7 +139,7 @@ class SurfacePatch(NamedTuple):
 
 
 def surface_patch(
-    model: Any, lens: Lens, suture_y_mm: np.ndarray, bite_width_mm: float, reach: float = 0.8
+    model: WoundModel, lens: Lens, suture_y_mm: np.ndarray, bite_width_mm: float, reach: float = 0.8
 ) -> SurfacePatch:
     """The top surface's triangles within ``reach`` wound lengths of the wound's centre,
     deformed, with their rise above the far field, and the sutures as segments between the

@@ -220,8 +220,7 @@ def run_stages(
         vm = model.forms.von_mises_cells() if ok else None
         stats: dict[str, float] = {}
         min_J = d.min_det(model.u)
-        if ok:
-            assert vm is not None  # computed when ok
+        if vm is not None:
             samples = model.forms.von_mises_samples()  # None on P1: the cells are the samples
             corners = None if samples is None else d.X[d.cell_vertices]
             stats = stress_summary(vm, d.volumes, d.cell_vertices, d.midpoints, samples, corners)
@@ -257,7 +256,7 @@ def run_stages(
         diagnostics.update(
             {key: v for key, v in out.diagnostics.items() if key not in result._fields}
         )
-        profiles = sample_profiles(line_cells, cast(np.ndarray, vm)) if ok else None
+        profiles = sample_profiles(line_cells, vm) if vm is not None else None
         if profiles is not None:
             diagnostics.update(line_maxima(lines, profiles))
         if loads is not None:
@@ -266,7 +265,7 @@ def run_stages(
             result,
             cast(StageDiagnostics, {key: _finite(v) for key, v in diagnostics.items()}),
             model.displacement_input().astype(np.float32) if ok else None,
-            cast(np.ndarray, vm)[cell_input_order].astype(np.float32) if ok else None,
+            vm[cell_input_order].astype(np.float32) if vm is not None else None,
             profiles,
             loads,
         )

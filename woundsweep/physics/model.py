@@ -56,7 +56,7 @@ class WoundModel:
         jit: dict[str, Any] | None = None,
         tie_zone: bool = True,
     ) -> None:
-        self.solver = solver = solver or SolverSettings()
+        solver = solver or SolverSettings()
         # Without stage settings the closure zone is the one the mesh was built with.
         zone = None if stages is None else stages.closure_zone
         penalties = (stages or StageSettings()).contact_penalty_GPa

@@ -75,9 +75,8 @@ class SuturedClosure:
         solver: SolverSettings | None = None,
         jit: dict[str, Any] | None = None,
     ) -> None:
-        self.solver = solver or SolverSettings()
         stages = StageSettings(ClosureZone(1.0, zone_depth_fraction))
-        self.model = WoundModel(mesh, self.solver, stages, jit=jit, tie_zone=False)
+        self.model = WoundModel(mesh, solver, stages, jit=jit, tie_zone=False)
         if self.model.flanks is None or self.model.closure_line is None:
             raise ValueError("the mesh has no wound to suture")
         self.lens = lens

@@ -8,11 +8,14 @@ and commands that do not need DOLFINx never import it.
 from __future__ import annotations
 
 import importlib
+import io
 import logging
 import os
+import re
 import signal
 import sys
-from typing import NoReturn
+import warnings
+from typing import Any, NoReturn
 
 import click
 
@@ -75,6 +78,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "woundsweep.commands.case",
         "One clinical case: an elliptical excision closed by sutures; report with forces.",
     ),
+    "verify": (
+        "woundsweep.commands.verify",
+        "Verification cases: manufactured-solution rates, closed forms, contact known answers.",
+    ),
 }
 
 
@@ -84,7 +91,9 @@ def missing_required(cmd: click.Command, ctx: click.Context, args: list[str]) ->
     parse (click then reports that) or ask for help."""
     if any(a in ctx.help_option_names for a in args):
         return []
-    sub = click.Context(cmd, info_name=cmd.name, parent=ctx, resilient_parsing=True)
+    # Not resilient: an unknown option anywhere is click's to report (a resilient parse
+    # would stop at it and count the arguments after it as missing).
+    sub = click.Context(cmd, info_name=cmd.name, parent=ctx)
     try:
         opts, _, _ = cmd.make_parser(sub).parse_args(args=list(args))
     except click.ClickException:
@@ -132,6 +141,25 @@ def serial_blas() -> None:
         os.environ.setdefault(var, "1")
 
 
+def check_tmpdir() -> None:
+    """WoundsweepError unless ``$TMPDIR`` (when set) is a directory a file can be made in:
+    MPI, which the solving commands start, puts its session directory there and otherwise
+    ends the process with a long banner."""
+    import tempfile
+
+    where = os.environ.get("TMPDIR")
+    if not where:
+        return
+    try:
+        with tempfile.TemporaryFile(prefix=".woundsweep-check.", dir=where):
+            pass
+    except OSError as err:
+        raise WoundsweepError(
+            f"TMPDIR={where}: cannot make a temporary file there ({err.strerror}); set TMPDIR "
+            "to a writable directory"
+        ) from None
+
+
 class LazyGroup(click.Group):
     def resolve_command(
         self, ctx: click.Context, args: list[str]
@@ -141,6 +169,8 @@ class LazyGroup(click.Group):
             missing = missing_required(cmd, ctx, rest)
             if len(missing) > 1:
                 raise click.UsageError(f"{name}: missing {', '.join(missing)} (see --help)")
+            if name in SERIAL_COMMANDS and not any(a in ctx.help_option_names for a in rest):
+                check_tmpdir()
         return name, cmd, rest
 
     def list_commands(self, ctx: click.Context) -> list[str]:
@@ -186,8 +216,80 @@ def _quiet_resource_tracker() -> None:
         os.environ["PYTHONWARNINGS"] = ",".join(w for w in (current, _TRACKER_WARNING) if w)
 
 
+# Control characters other than tab and newline, as the standard output shows them escaped.
+_STDOUT_CONTROL = re.compile(rb"[\x00-\x08\x0b-\x1f\x7f]")
+
+
+class _EscapingStdout(io.RawIOBase):
+    """The standard output's bytes with control characters escaped (``\\x1b``): a path
+    printed by a command cannot move the cursor or rewrite the terminal's lines."""
+
+    def __init__(self, sink: Any) -> None:
+        self.sink = sink
+
+    def writable(self) -> bool:
+        return True
+
+    def write(self, data: Any) -> int:
+        raw = bytes(data)
+        self.sink.write(_STDOUT_CONTROL.sub(lambda m: b"\\x%02x" % m.group()[0], raw))
+        return len(raw)
+
+    def flush(self) -> None:
+        self.sink.flush()
+
+
+def _closed(fd: int) -> bool:
+    try:
+        os.fstat(fd)
+    except OSError:
+        return True
+    return False
+
+
+def _standard_streams() -> int | None:
+    """Standard streams a command can use: a closed standard input or error reads or
+    writes /dev/null (so no file the command opens takes its descriptor); a closed standard
+    output is refused (exit status 2), as the command's output would be lost."""
+    for fd in (0, 2, 1):
+        if _closed(fd):
+            null = os.open(os.devnull, os.O_RDWR)
+            if null != fd:
+                os.dup2(null, fd)
+                os.close(null)
+            name = ("stdin", "stdout", "stderr")[fd]
+            if getattr(sys, name) is None:
+                setattr(sys, name, open(fd, "r" if fd == 0 else "w", closefd=False))  # noqa: SIM115
+            if fd == 1:
+                print("woundsweep: error: standard output is closed", file=sys.stderr, flush=True)
+                return 2
+    return None
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point: user errors become one line on stderr and exit status 2 (no traceback)."""
+    closed = _standard_streams()
+    if closed is not None:
+        return closed
+    stdout = sys.stdout
+    if hasattr(stdout, "buffer"):
+        stdout.flush()
+        sys.stdout = io.TextIOWrapper(
+            _EscapingStdout(stdout.buffer),
+            encoding=stdout.encoding, errors=stdout.errors, write_through=True,
+        )  # fmt: skip
+    try:
+        with warnings.catch_warnings():
+            if not sys.warnoptions:  # libraries' warnings (numpy, matplotlib) are not the
+                warnings.simplefilter("ignore")  # command's output; PYTHONWARNINGS shows them
+            return _main(argv)
+    finally:
+        if sys.stdout is not stdout:
+            sys.stdout.flush()
+            sys.stdout = stdout
+
+
+def _main(argv: list[str] | None) -> int:
     _quiet_resource_tracker()
     old = None
     if signal.getsignal(signal.SIGINT) is signal.default_int_handler:

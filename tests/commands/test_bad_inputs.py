@@ -5,8 +5,11 @@ CLI once (tests/support/cli_forkserver.py), with a timeout; a few also run throu
 woundsweep` to show that the two agree. For every refused input the case asserts the exit
 status, exactly one line on stderr naming the problem (and no traceback), and that the run
 directory (or the directory it would have created) is unchanged byte for byte. None of these
-need DOLFINx. The cases are listed in tests/support/bad_input_cases.py; damaged and stale
-files in a run directory are the subject of test_store_damage.py.
+need DOLFINx. The cases are listed in tests/support/bad_input_cases.py and (fuzz round 4:
+unbounded sizes, outputs aimed at the store, unknown options first)
+tests/support/bad_input_cases_round4.py; damaged and stale files in a run directory are the
+subject of test_store_damage.py, links, named pipes, stale viewers' inputs and the
+environment of test_fuzz_round4.py.
 """
 
 from __future__ import annotations
@@ -16,9 +19,13 @@ import subprocess
 from pathlib import Path
 
 import pytest
-from bad_input_cases import CASES, Case
+from bad_input_cases import CASES as ROUNDS_1_3
+from bad_input_cases import Case
+from bad_input_cases_round4 import ROUND4_CASES
 from cli_run import WS, ForkCli
 from dir_snapshot import snapshot
+
+CASES = ROUNDS_1_3 + ROUND4_CASES
 
 
 def test_at_least_150_distinct_cases() -> None:

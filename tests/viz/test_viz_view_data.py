@@ -18,7 +18,8 @@ from woundsweep.config.manifest import load_run
 from woundsweep.core.diagnostics import StageReport
 from woundsweep.core.schema import PROFILE_LINES
 from woundsweep.mesh.cache import load_mesh, mesh_path
-from woundsweep.store.solverfile import write_solver_file
+from woundsweep.store.identity import result_fingerprint
+from woundsweep.store.solverfile import stamp_fingerprint, write_solver_file
 from woundsweep.viz.surface import plane_slice
 
 
@@ -62,6 +63,7 @@ def _solver_file(run: Path, job_index: int, path: Path, lines: int = 3) -> dict[
     attrs = {"job_id": job["job_id"], "job_index": job_index, "geometry_id": job["geometry_id"]}
     path.parent.mkdir(parents=True, exist_ok=True)
     write_solver_file(path, attrs, mesh, [StageReport.from_row(r) for r in rows], fields, extra)
+    stamp_fingerprint(path, result_fingerprint(r.sweep, job))  # as `woundsweep solve` does
     return profiles
 
 

@@ -33,6 +33,21 @@ def _check_out(run_dir: Path, out: Path) -> None:
         )
 
 
+def _stale_pages(out: Path, jobs: set[int]) -> list[Path]:
+    """The site's job pages (``jobs/job-<N>.html``, regular files) of jobs not in ``jobs``."""
+    import re
+
+    pages = out / "jobs"
+    if not pages.is_dir() or pages.is_symlink():
+        return []
+    name = re.compile(r"job-(\d+)\.html")
+    return sorted(
+        p
+        for p in pages.iterdir()
+        if (m := name.fullmatch(p.name)) and int(m.group(1)) not in jobs and not p.is_symlink()
+    )
+
+
 def _warn_if_stale(run: Run, results: pd.DataFrame) -> None:
     """A line on stderr when RUN_DIR/analysis was trained on other settings or results."""
     import json
@@ -112,6 +127,11 @@ def cmd(run_dir: Path, out: Path | None, views: str) -> None:
         s = build_atlas(run, results, out, chosen, progress)
     finally:
         bar.close()
+    stale = _stale_pages(out, {int(j) for j in run.manifest["job_index"]})
+    for page in stale:  # pages of jobs the manifest no longer holds (`generate --force`)
+        page.unlink(missing_ok=True)
+    if stale:
+        click.echo(f"removed {len(stale)} pages of jobs the manifest no longer holds")
     per = f", {s.view_bytes / s.views / 1e3:.0f} kB each" if s.views else ""
     click.echo(
         f"wrote {s.jobs} job pages in {s.seconds:.1f} s; site {_mb(s.total_bytes)}: "

@@ -25,6 +25,28 @@ __all__ = ["cmd"]
 _ITCH = ItchLoad()
 
 
+# What a case writes into --out (`studies.case_report`).
+_REPORT_FILES = ("report.md", "case.json", "forces.png", "wound.png", "view.png")
+
+
+def _set_aside_previous(out: Path) -> None:
+    """Move an earlier case's report files in ``out`` to ``out/previous/`` (kept, not taken
+    for this case's), replacing what an earlier failure put there."""
+    import os
+
+    found = [out / n for n in _REPORT_FILES if (out / n).is_file() and not (out / n).is_symlink()]
+    if not found:
+        return
+    dst = out / "previous"
+    try:
+        dst.mkdir(exist_ok=True)
+        for p in found:
+            os.replace(p, dst / p.name)
+    except OSError:
+        return  # the error being reported is the command's; the files stay where they were
+    click.echo(f"the previous case's report in {out} moved to {dst}")
+
+
 @click.command("case")
 @click.option(
     "--out",
@@ -152,11 +174,15 @@ def cmd(out: Path, length_mm: float, width_mm: float | None, angle_deg: float, s
     from ..studies.case import run_case
     from ..studies.case_report import write_report
 
-    result = run_case(
-        case, echo=lambda s: click.echo(s), compare=not no_compare, even=not no_even,
-        converge=converge,
-    )  # fmt: skip
-    command = "woundsweep " + " ".join(shlex.quote(a) for a in sys.argv[1:])
-    path = write_report(result, out, command)
+    try:
+        result = run_case(
+            case, echo=lambda s: click.echo(s), compare=not no_compare, even=not no_even,
+            converge=converge,
+        )  # fmt: skip
+        command = "woundsweep " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+        path = write_report(result, out, command)
+    except BaseException:
+        _set_aside_previous(out)  # a failed case leaves no earlier case's report as its own
+        raise
     click.echo(path.read_text())
     click.echo(f"wrote {path}")

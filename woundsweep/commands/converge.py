@@ -109,6 +109,42 @@ def _fit_lines(study: dict[str, Any]) -> list[str]:
     return lines
 
 
+def _check_cells(
+    run_dir: Path,
+    job_index: int,
+    levels: int,
+    ratio: float,
+    factors: list[float] | None,
+    refinements: int | None,
+) -> None:
+    """Every level within the cell cap (`mesh.sizing.MAX_CELLS`, the size law's estimate),
+    before anything is meshed: a level of gmsh, or the base mesh times 8 per refinement."""
+    import dataclasses
+
+    from ..config.manifest import load_run
+    from ..mesh.sizing import MAX_CELLS, estimate_cells
+    from ..studies.convergence import level_factors
+
+    run = load_run(run_dir, job_index)
+    base = run.geometry(run.job(job_index))
+    if refinements is not None:
+        m0 = factors[0] if factors else base.mesh_size_factor
+        cells = estimate_cells(dataclasses.replace(base, mesh_size_factor=m0)) * 8**refinements
+        if not cells <= MAX_CELLS:
+            raise SolverError(
+                f"--refine {refinements}: its finest level would have about {cells:.3g} cells, "
+                f"above the cap of {MAX_CELLS:,} (refine fewer times or start coarser)"
+            )
+        return
+    for m in factors or level_factors(base.mesh_size_factor, levels, ratio):
+        cells = estimate_cells(dataclasses.replace(base, mesh_size_factor=m))
+        if not cells <= MAX_CELLS:
+            raise SolverError(
+                f"the level at mesh size factor {m:g} would have about {cells:.3g} cells, "
+                f"above the cap of {MAX_CELLS:,} (fewer or coarser levels)"
+            )
+
+
 @click.command("converge")
 @click.argument("run_dir", type=click.Path(file_okay=False, path_type=Path))
 @click.option("--job", "job_index", type=int, required=True, help="Manifest job_index.")
@@ -156,6 +192,7 @@ def cmd(
     factors = None if factors_text is None else parse_factors(factors_text, minimum)
     if refinements is not None:
         check_refinements(refinements, factors)
+    _check_cells(run_dir, job_index, levels, ratio, factors, refinements)
     logging.getLogger().setLevel(logging.WARNING)  # FFCx/cffi log every compile at INFO
     study = convergence_study(
         run_dir,

@@ -20,6 +20,15 @@ from ..core.runlock import hold_run, release
 __all__ = ["cmd", "generate", "stale_results"]
 
 
+def _to_parquet(manifest: pd.DataFrame, tmp: str) -> None:
+    import io
+
+    buf = io.BytesIO()  # bytes written by Python: pyarrow takes a path (or a file's name) as
+    manifest.to_parquet(buf, index=False)  # UTF-8 only, so a non-UTF-8 path would not open
+    with open(tmp, "wb") as fh:
+        fh.write(buf.getbuffer())
+
+
 def _existing_sweep(run_dir: Path) -> dict | None:
     path = RunLayout(run_dir).sweep
     if not path.exists():
@@ -33,7 +42,8 @@ def _existing_sweep(run_dir: Path) -> dict | None:
 def _manifest_matches(path: Path, manifest: pd.DataFrame) -> bool:
     """Does the stored manifest read back whole and equal the expansion of its sweep?"""
     try:
-        old = pd.read_parquet(path)
+        with open(path, "rb") as fh:  # by Python: pyarrow takes paths as UTF-8 only
+            old = pd.read_parquet(fh)
         return bool(old[list(MANIFEST_COLUMNS)].equals(manifest))
     except Exception:  # noqa: BLE001 - any failure to read it back means it must be rewritten
         return False
@@ -129,7 +139,7 @@ def _write_run(
     layout = RunLayout(rd)
     try:
         rd.mkdir(parents=True, exist_ok=True)
-        atomic_write(layout.manifest, lambda tmp: manifest.to_parquet(tmp, index=False))
+        atomic_write(layout.manifest, lambda tmp: _to_parquet(manifest, tmp))
         prov = provenance() | {
             "sweep_file": str(Path(sweep_path).resolve()),
             "sweep_name": sweep.name,

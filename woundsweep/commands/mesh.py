@@ -120,6 +120,9 @@ def cmd(
     if out is not None and (all_ or out.suffix.lower() != ".vtu"):
         raise click.UsageError("--out takes a .vtu file and needs --job or --geometry")
     if out is not None:
+        from ..store.paths import refuse_store_target
+
+        refuse_store_target(run_dir, out, "--out")
         try:
             check_output_file(out)
         except ValueError as err:

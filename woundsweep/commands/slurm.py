@@ -20,6 +20,7 @@ from ..execution.slurm import (
     parse_mem,
     parse_stages,
     parse_time,
+    read_submissions,
     record_submission,
     submit,
     warmup_shard,
@@ -122,6 +123,8 @@ def cmd(
         cache_dir=cache,
         warmup=warmup_shard(run.manifest),
     )
+    if do_submit:
+        read_submissions(rd)  # a damaged jobs.json is refused before anything is submitted
     paths = write_scripts(opts)
     click.echo(f"wrote {', '.join(str(p) for p in paths if p is not None)}")
     if not do_submit:
@@ -133,8 +136,13 @@ def cmd(
         if any(err.submission):
             record_submission(opts, err.submission)
         raise
-    where = record_submission(opts, sub)
+    # The ids first: what was submitted is printed even if recording it fails.
     click.echo(f"warm-up job {sub.warmup} (shard {opts.warmup} of one job)")
     click.echo(f"array job {sub.array} ({shards} tasks, after the warm-up)")
     click.echo(f"follow-up job {sub.followup} (after the array)")
+    try:
+        where = record_submission(opts, sub)
+    except (OSError, SlurmError) as err:
+        ids = ", ".join(i for i in sub if i)
+        raise SlurmError(f"submitted jobs {ids} but could not record them: {err}") from None
     click.echo(f"job ids recorded in {where}; logs in {opts.log_dir}")

@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 
 from ..core.errors import GeometryError
 from .fusiform import FLOOR_RISE
-from .geometry import FINEST_FACTOR, GeometrySpec
+from .geometry import FINEST_FACTOR, LENGTH_RANGE_MM, GeometrySpec
 from .solver import DEGREES, SolverSettings
 from .sutures import BODY_SITES, CaseError, ItchLoad, SuturePlan
 
@@ -72,6 +72,10 @@ class ClinicalCase:
                 or v <= 0
             ):
                 raise CaseError(f"{name}={v!r} must be a positive length in mm")
+            if not LENGTH_RANGE_MM[0] <= v <= LENGTH_RANGE_MM[1]:
+                raise CaseError(
+                    f"{name}={v:g} must be within {LENGTH_RANGE_MM[0]:g}-{LENGTH_RANGE_MM[1]:g} mm"
+                )
         if self.width >= self.length_mm:
             raise CaseError(
                 f"width_mm={self.width:g} must be below the length ({self.length_mm:g} mm)"
@@ -103,7 +107,8 @@ class ClinicalCase:
                 f"bite_depth_mm={bite:g} must stay on the walls, above "
                 f"{_ZONE_MAX * self.depth:.3g} mm for a {self.depth:g} mm deep excision"
             )
-        self.sutures.positions(self.length_mm)  # raises if none fits
+        self.sutures.positions(self.length_mm)  # raises if none fits (or too many would)
+        self.geometry()  # the excision's bounds (scale, sizes), before anything is meshed
 
     @property
     def width(self) -> float:

@@ -91,6 +91,61 @@ def canonical_hash(params: dict[str, Any]) -> str:
     return hashlib.sha256(blob.encode()).hexdigest()[:16]
 
 
+def _encoded(column: pd.Series, nan: str | None) -> list[str | None] | None:
+    """A column's values as canonical JSON texts (numbers as float reprs, strings quoted; a
+    NaN as ``nan``, None meaning the key is left out); None for any other value."""
+    if column.dtype.kind in "fiu":
+        a = column.to_numpy(dtype=float)
+        if np.isinf(a).any():
+            return None
+        out: list[str | None] = [repr(x) for x in a.tolist()]
+        for i in np.flatnonzero(np.isnan(a)).tolist():
+            out[i] = nan
+        return out
+    texts: dict[Any, str | None] = {}
+    out = []
+    for v in column.tolist():
+        key = (type(v), v)
+        if key not in texts:
+            if isinstance(v, str):
+                texts[key] = json.dumps(v)
+            elif isinstance(v, float) and math.isnan(v):
+                texts[key] = nan
+            elif is_number(v):
+                texts[key] = repr(float(v))
+            else:
+                return None
+        out.append(texts[key])
+    return out
+
+
+def json_rows(frame: pd.DataFrame, keys: Sequence[str], nan: str | None) -> list[str] | None:
+    """Each row of ``frame``'s ``keys`` as the text ``json.dumps(row, sort_keys=True,
+    separators=(",", ":"))`` gives for it after `canonical_hash`'s normalisation (numbers as
+    floats; a NaN left out when ``nan`` is None, else written as ``nan``), built column by
+    column (a million rows in seconds); None when a value is neither a string nor a finite
+    number (the caller then takes the row-by-row path)."""
+    columns = []
+    for k in sorted(keys):
+        enc = _encoded(frame[k], nan)
+        if enc is None:
+            return None
+        columns.append((json.dumps(k) + ":", enc))
+    rows = []
+    for i in range(len(frame)):
+        parts = [name + col[i] for name, col in columns if col[i] is not None]  # type: ignore[operator]
+        rows.append("{" + ",".join(parts) + "}")
+    return rows
+
+
+def canonical_hashes(frame: pd.DataFrame, keys: Sequence[str]) -> list[str]:
+    """`canonical_hash` of each row's ``keys``, in order."""
+    rows = json_rows(frame, keys, None)
+    if rows is None:
+        return [canonical_hash(r) for r in frame[list(keys)].to_dict("records")]
+    return [hashlib.sha256(r.encode()).hexdigest()[:16] for r in rows]
+
+
 def _derive(df: pd.DataFrame) -> pd.DataFrame:
     td = df["dermal_thickness_mm"]
     df["subcutis_thickness_mm"] = df["subcutis_thickness_factor"] * td
@@ -230,7 +285,8 @@ def load_run(run_dir: str | Path, job: int | None = None) -> Run:
             f"{rd}: not a run directory (run `woundsweep generate SWEEP.yaml --out {rd}`)"
         )
     try:
-        manifest = pd.read_parquet(manifest_path)
+        with open(manifest_path, "rb") as fh:  # by Python: pyarrow takes paths as UTF-8 only
+            manifest = pd.read_parquet(fh)
     except Exception as err:  # pyarrow raises several types for damaged files
         raise StoreError(f"{manifest_path}: unreadable manifest ({type(err).__name__})") from None
     for name in _LATER_COLUMNS:  # absent from manifests made before the excision existed
@@ -291,15 +347,15 @@ def manifest_problem(
         if bad.any():
             return f"job {int(idx[bad].iloc[0])}: {col} is not derived from its parameters"
     rows = list(range(n)) if hashed is None else [i for i in hashed if 0 <= i < n]
-    records = params.iloc[rows].to_dict("records")
+    picked = params.iloc[rows]
     job_ids, geometry_ids = manifest["job_id"].tolist(), manifest["geometry_id"].tolist()
-    geometries: dict[str, str] = {}  # geometry_id -> its hash, computed once per geometry
-    for i, rec in zip(rows, records):
-        if canonical_hash(rec) != job_ids[i]:
+    for i, h in zip(rows, canonical_hashes(picked, list(params.columns))):
+        if h != job_ids[i]:
             return f"job {i}: job_id is not the hash of its parameters"
-        gid = geometry_ids[i]
-        if gid not in geometries:
-            geometries[gid] = canonical_hash({k: rec[k] for k in GEOMETRY_KEYS})
-        if geometries[gid] != gid:
+    gids = pd.Series([geometry_ids[i] for i in rows])
+    first = ~gids.duplicated().to_numpy()  # each geometry's hash computed once
+    firsts = [i for i, f in zip(rows, first) if f]
+    for i, h in zip(firsts, canonical_hashes(params.iloc[firsts], list(GEOMETRY_KEYS))):
+        if h != geometry_ids[i]:
             return f"job {i}: geometry_id is not the hash of its geometry"
     return ""

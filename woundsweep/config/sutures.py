@@ -18,10 +18,13 @@ import math
 from dataclasses import dataclass
 
 from ..core.errors import WoundsweepError
+from .geometry import LENGTH_RANGE_MM
 
-__all__ = ["BODY_SITES", "BodySite", "CaseError", "ItchLoad", "SuturePlan"]
+__all__ = ["BODY_SITES", "MAX_SUTURES", "BodySite", "CaseError", "ItchLoad", "SuturePlan"]
 
 BITE_WIDTH_mm = 3.0
+# At most this many sutures (one every 0.5 mm on a 10 cm wound); each is a footprint to tie.
+MAX_SUTURES = 200
 
 
 class CaseError(WoundsweepError):
@@ -29,6 +32,7 @@ class CaseError(WoundsweepError):
 
 
 def _positive(name: str, value: float | None, allow_none: bool = False) -> None:
+    """A positive length in mm, within `LENGTH_RANGE_MM` (CaseError otherwise)."""
     if value is None and allow_none:
         return
     if (
@@ -38,6 +42,9 @@ def _positive(name: str, value: float | None, allow_none: bool = False) -> None:
         or value <= 0
     ):
         raise CaseError(f"{name}={value!r} must be a positive number")
+    lo, hi = LENGTH_RANGE_MM
+    if not lo <= value <= hi:
+        raise CaseError(f"{name}={value:g} must be within {lo:g}-{hi:g} mm")
 
 
 @dataclass(frozen=True)
@@ -64,6 +71,8 @@ class SuturePlan:
             isinstance(self.count, bool) or not isinstance(self.count, int) or self.count < 1
         ):
             raise CaseError(f"suture count={self.count!r} must be a whole number >= 1")
+        if self.count is not None and self.count > MAX_SUTURES:
+            raise CaseError(f"suture count={self.count} must be at most {MAX_SUTURES}")
         _positive("suture spacing_mm", self.spacing_mm, allow_none=True)
         _positive("bite_width_mm", self.bite_width_mm)
         _positive("bite_depth_mm", self.bite_depth_mm, allow_none=True)
@@ -80,6 +89,11 @@ class SuturePlan:
                 step = length_mm / (n + 1)
             else:
                 step = self.spacing_mm if self.spacing_mm is not None else self.bite_width_mm
+                if not length_mm / step <= MAX_SUTURES + 1:  # counted before any is placed
+                    raise CaseError(
+                        f"suture spacing {step:g} mm puts more than {MAX_SUTURES} sutures on "
+                        f"a {length_mm:g} mm wound"
+                    )
                 n = int(math.ceil(length_mm / step - 1e-9)) - 1
                 if n < 1:
                     raise CaseError(

@@ -11,11 +11,14 @@ from collections.abc import Callable
 from pathlib import Path
 
 __all__ = [
+    "NotRegularFile",
     "atomic_write",
     "atomic_write_bytes",
     "check_output_dir",
     "check_output_file",
+    "open_regular",
     "read_small_text",
+    "read_tail",
 ]
 
 
@@ -41,11 +44,14 @@ def atomic_write(path: str | Path, write: Callable[[str], object]) -> None:
         with open(tmp, "rb+") as fh:
             os.fsync(fh.fileno())
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as err:
         try:
             os.unlink(tmp)
         except FileNotFoundError:
             pass
+        if isinstance(err, OSError) and not err.filename and err.errno:
+            # a write that failed (a full disk, past `ulimit -f`) names the file it was for
+            raise OSError(err.errno, err.strerror or str(err), str(path)) from None
         raise
     try:  # make the rename itself durable
         dfd = os.open(path.parent, os.O_RDONLY)
@@ -77,6 +83,49 @@ def _kind(mode: int) -> str:
     if stat.S_ISSOCK(mode):
         return "a socket"
     return "not a regular file"
+
+
+class NotRegularFile(OSError):
+    """A path where a regular file is expected holds something else (a named pipe, a device,
+    a directory, a symbolic link): ``filename`` names it, ``strerror`` says what it is."""
+
+
+def open_regular(path: str | Path, flags: int = os.O_RDONLY, mode: int = 0o644) -> int:
+    """A descriptor of ``path`` opened as a regular file (``flags`` as for `os.open`).
+
+    The open neither follows a symbolic link in the last component (``O_NOFOLLOW``: a link
+    inside a run directory cannot lead a write or a read outside it) nor blocks (a named pipe
+    without a writer cannot hang the caller); the descriptor is checked with ``fstat`` and is
+    blocking again when returned. `NotRegularFile` (an `OSError` naming the path) otherwise;
+    other `OSError`s (a missing file, say) as `os.open` raises them.
+    """
+    nonblock = os.O_NONBLOCK | os.O_NOFOLLOW | os.O_CLOEXEC | getattr(os, "O_NOCTTY", 0)
+    try:
+        fd = os.open(path, flags | nonblock, mode)
+    except OSError as err:
+        if err.errno == errno.ELOOP:
+            raise NotRegularFile(
+                errno.ELOOP, "a symbolic link, not a regular file", str(path)
+            ) from None
+        if err.errno in (errno.ENXIO, errno.EISDIR):  # a FIFO without reader; a directory
+            what = "a directory" if err.errno == errno.EISDIR else "a named pipe"
+            raise NotRegularFile(err.errno, f"{what}, not a regular file", str(path)) from None
+        raise
+    st_mode = os.fstat(fd).st_mode
+    if not stat.S_ISREG(st_mode):
+        os.close(fd)
+        raise NotRegularFile(errno.EINVAL, f"{_kind(st_mode)}, not a regular file", str(path))
+    os.set_blocking(fd, True)
+    return fd
+
+
+def read_tail(path: str | Path, limit: int) -> tuple[int, bytes]:
+    """The size of the regular file ``path`` and its last ``limit`` bytes (`open_regular`)."""
+    with os.fdopen(open_regular(path), "rb") as fh:
+        size = os.fstat(fh.fileno()).st_size
+        if size > limit:
+            fh.seek(size - limit)
+        return size, fh.read(limit)
 
 
 def read_small_text(path: str | Path, max_bytes: int, expected: str = "a text file") -> str:

@@ -15,6 +15,7 @@ import os
 from pathlib import Path
 
 from .errors import StoreError
+from .fsutil import NotRegularFile, open_regular
 from .layout import RunLayout
 
 __all__ = ["claim", "hold_run", "release"]
@@ -22,14 +23,17 @@ __all__ = ["claim", "hold_run", "release"]
 
 def _lock(path: Path, mode: int, create: bool) -> int | None:
     """An open descriptor of ``path`` locked with ``mode`` (non-blocking), or None if another
-    process holds a conflicting lock (or, without ``create``, the file does not exist)."""
-    flags = os.O_RDWR | os.O_CLOEXEC | (os.O_CREAT if create else 0)
+    process holds a conflicting lock (or, without ``create``, the file does not exist).
+    StoreError when ``path`` is not a regular file (a link, a named pipe: `open_regular`)."""
+    flags = os.O_RDWR | (os.O_CREAT if create else 0)
     try:
-        fd = os.open(path, flags, 0o644)
+        fd = open_regular(path, flags, 0o644)
     except FileNotFoundError:
         if create:
             raise
         return None
+    except NotRegularFile as err:
+        raise StoreError(f"{path}: {err.strerror} (move it away)") from None
     try:
         fcntl.flock(fd, mode | fcntl.LOCK_NB)
     except BlockingIOError:

@@ -198,7 +198,8 @@ class ForkServer:
         for pid, log in self.children.items():
             kill_group(pid)  # PR_SET_PDEATHSIG has done it already; strays of the group
             try:
-                with open(log, "ab") as fh:
+                fd = os.open(log, os.O_WRONLY | os.O_APPEND | os.O_NOFOLLOW | os.O_NONBLOCK)
+                with os.fdopen(fd, "ab") as fh:
                     fh.write(b"=== the fork server ended; this attempt was killed with it\n")
             except OSError:
                 pass
@@ -331,7 +332,8 @@ def _child(req: dict[str, Any], server_pid: int, server_fds: tuple[int, ...]) ->
         for fd in server_fds:
             os.close(fd)
         _reset_signals()
-        log = os.open(req["log"], os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
+        # the runner checked the log (a regular file); a link put there since is not followed
+        log = os.open(req["log"], os.O_WRONLY | os.O_APPEND | os.O_CREAT | os.O_NOFOLLOW, 0o644)
         null = os.open(os.devnull, os.O_RDONLY)
         os.dup2(null, 0)
         os.dup2(log, 1)

@@ -18,6 +18,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from ..core.fsutil import open_regular
+
 if TYPE_CHECKING:
     from ..config.manifest import JobRow
 
@@ -136,7 +138,7 @@ def kill_group(pid: int) -> None:
 def log_tail(path: Path, offset: int, limit: int = 65536) -> str:
     """The log from ``offset`` (an attempt's start) on, at most its last ``limit`` bytes."""
     try:
-        with open(path, "rb") as fh:
+        with os.fdopen(open_regular(path), "rb") as fh:  # a named pipe cannot hang the runner
             fh.seek(0, os.SEEK_END)
             end = fh.tell()
             fh.seek(max(offset, end - limit))

@@ -37,6 +37,7 @@ from typing import Any, NamedTuple
 from ..config.manifest import JobRow, Run, load_run
 from ..core.errors import StoreError, WoundsweepError
 from ..core.faults import ATTEMPT_ENV
+from ..core.fsutil import NotRegularFile, open_regular
 from ..core.layout import RunLayout
 from ..core.runlock import claim, hold_run, release
 from ..core.schema import ExitCode, FailureClass, ResultState
@@ -83,6 +84,18 @@ class RunSummary(NamedTuple):
     wall_time_s: float
 
 
+def _append(log: Path) -> Any:
+    """The job's log opened for appending; only a regular file in ``logs/`` (a link or a
+    named pipe there is refused: StoreError naming it)."""
+    try:
+        fd = open_regular(log, os.O_WRONLY | os.O_APPEND | os.O_CREAT)
+    except NotRegularFile as err:
+        raise StoreError(f"{log}: {err.strerror} (move it away)") from None
+    fh = os.fdopen(fd, "ab")
+    fh.seek(0, os.SEEK_END)
+    return fh
+
+
 class _Runner:
     def __init__(self, store: Store, opts: RunOptions) -> None:
         self.run_dir = store.run_dir
@@ -117,7 +130,7 @@ class _Runner:
         env = dict(self.env)
         env[ATTEMPT_ENV] = str(job.attempts)
         limit = self.opts.timeout_s + (self.opts.warmup_extra_s if self.warming else 0.0)
-        with open(log, "ab") as fh:
+        with _append(log) as fh:
             offset = fh.tell()
             stamp = time.strftime("%Y-%m-%dT%H:%M:%S%z")
             fh.write(
@@ -220,7 +233,7 @@ class _Runner:
                 f"{self.run_dir}: cannot write the store ({cls.disk_full}): job {job.index} "
                 f"stopped, nothing stored for it; free space and rerun (see {log})"
             )
-        with open(log, "ab") as fh:
+        with _append(log) as fh:
             fh.write(
                 f"=== attempt {job.attempts} ended: {cls.failure_class}"
                 f"{': ' + cls.detail if cls.detail else ''} ({wall:.1f} s wall, {cpu:.1f} s cpu)\n".encode()
@@ -320,6 +333,10 @@ def run_shard(run_dir: str | Path, opts: RunOptions) -> RunSummary:
     t0 = time.time()
     seen = _run_files(Path(run_dir))
     run = load_run(run_dir)  # checked before anything is made or locked in the directory
+    if opts.shard.count > len(run.manifest):  # before any per-shard state is built
+        raise StoreError(
+            f"--shard {opts.shard}: more shards than the {len(run.manifest)} jobs of {run_dir}"
+        )
     store = Store(run.run_dir)
     store.ensure_dirs()
     lock = hold_run(store.run_dir, exclusive=False)

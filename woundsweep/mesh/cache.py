@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import os
 import re
 from pathlib import Path
 from typing import Any, NamedTuple
@@ -24,7 +25,7 @@ import numpy as np
 from ..config.geometry import GeometrySpec
 from ..config.solver import DEGREES
 from ..core.errors import StoreError
-from ..core.fsutil import atomic_write
+from ..core.fsutil import NotRegularFile, atomic_write, open_regular
 from ..core.layout import RunLayout
 from ..core.schema import CELL_TAGS, FACET_TAGS, MeshData
 from ..core.versions import MESH_CACHE_FORMAT, MESH_LAW_VERSION
@@ -102,11 +103,13 @@ def load_mesh(path: str | Path, spec: GeometrySpec | None = None) -> MeshData:
     """Read and validate a cached mesh (against ``spec`` when given); StoreError (one line, the
     reason) if it is unusable."""
     path = Path(path)
-    try:
-        with np.load(path, allow_pickle=False) as npz:
+    try:  # a regular file only: a named pipe or a link to a device is not read (it would hang)
+        with os.fdopen(open_regular(path), "rb") as fh, np.load(fh, allow_pickle=False) as npz:
             arrays = {name: npz[name] for name in (*_ARRAYS, "meta")}
     except FileNotFoundError:
         raise StoreError(f"{path}: no cached mesh") from None
+    except NotRegularFile as err:
+        raise StoreError(f"{path}: {err.strerror}") from None
     except Exception as err:  # zipfile/numpy raise many types for damaged files
         raise StoreError(f"{path}: unreadable ({type(err).__name__}: {err})") from None
     try:
@@ -169,7 +172,7 @@ def get_mesh(run_dir: str | Path, spec: GeometrySpec) -> CachedMesh:
     (GeometryError) and cached."""
     path = mesh_path(run_dir, spec.mesh_id)
     reason = ""
-    if path.exists():
+    if os.path.lexists(path):
         try:
             return CachedMesh(load_mesh(path, spec), path, "cached", "")
         except StoreError as err:

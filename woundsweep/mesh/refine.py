@@ -15,7 +15,9 @@ from collections.abc import Callable
 
 import numpy as np
 
+from ..core.errors import GeometryError
 from .build import MeshData, signed_volumes
+from .sizing import MAX_CELLS
 
 __all__ = ["refine_uniform"]
 
@@ -69,7 +71,13 @@ def _children(points: np.ndarray, cells: np.ndarray, mid: np.ndarray) -> np.ndar
 
 def refine_uniform(mesh: MeshData) -> MeshData:
     """The mesh with every cell split into eight and every facet into four (tags kept;
-    children positively oriented; ``info`` copied with the new cell count)."""
+    children positively oriented; ``info`` copied with the new cell count). GeometryError
+    when the refined mesh would exceed `sizing.MAX_CELLS` cells (before anything is built)."""
+    if 8 * len(mesh.cells) > MAX_CELLS:
+        raise GeometryError(
+            f"a uniform refinement of {len(mesh.cells):,} cells gives {8 * len(mesh.cells):,}, "
+            f"above the cap of {MAX_CELLS:,}"
+        )
     points, mid, midpoint = _midpoints(mesh.points, mesh.cells)
     cells = _children(points, mesh.cells, mid).reshape(-1, 4)
     flip = signed_volumes(points, cells) < 0

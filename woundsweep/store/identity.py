@@ -18,7 +18,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from ..config.manifest import JobRow
+from ..config.manifest import JobRow, json_rows
 from ..config.sweep import GEOMETRY_KEYS, Sweep
 from ..core.versions import (
     MESH_LAW_VERSION,
@@ -54,20 +54,15 @@ def _plain(v: Any) -> Any:
     return str(v)
 
 
-def result_fingerprint(sweep: Sweep, job: JobRow | Mapping[str, Any]) -> str:
-    """sha256 (64 hex digits) of the job's parameters and the settings its result depends on.
-
-    ``job`` is a manifest row. The analysis settings and the sweep's name are not part of it.
-    """
-    settings = sweep.settings_dict()
+def _settings_doc(sweep: Sweep, skin: str, settings: dict[str, Any] | None = None) -> dict:
+    """Everything in a result's fingerprint but the job's own parameters (its skin's values)."""
+    settings = settings if settings is not None else sweep.settings_dict()
     materials = settings["materials"]
-    skin = str(job["skin_type"])
-    doc = {
+    return {
         "format": RESULT_FORMAT_VERSION,
         "mesh_law": MESH_LAW_VERSION,
         "statistics": STATISTICS_VERSION,
         "stages_model": STAGES_VERSION,
-        "job": {k: _plain(job[k]) for k in _JOB_KEYS},  # type: ignore[literal-required]  # JobRow keys
         "materials": {
             "subcutis": _plain(materials["subcutis"]),
             "skin": _plain(materials["skin_types"].get(skin)),
@@ -75,15 +70,47 @@ def result_fingerprint(sweep: Sweep, job: JobRow | Mapping[str, Any]) -> str:
         "stages": _plain(settings["stages"]),
         "solver": _plain(settings["solver"]),
     }
-    blob = json.dumps(doc, sort_keys=True, separators=(",", ":"), allow_nan=False)
-    return hashlib.sha256(blob.encode()).hexdigest()
+
+
+def _blob(doc: Any) -> str:
+    return json.dumps(doc, sort_keys=True, separators=(",", ":"), allow_nan=False)
+
+
+def result_fingerprint(sweep: Sweep, job: JobRow | Mapping[str, Any]) -> str:
+    """sha256 (64 hex digits) of the job's parameters and the settings its result depends on.
+
+    ``job`` is a manifest row. The analysis settings and the sweep's name are not part of it.
+    """
+    doc = _settings_doc(sweep, str(job["skin_type"]))
+    doc["job"] = {k: _plain(job[k]) for k in _JOB_KEYS}  # type: ignore[literal-required]  # JobRow keys
+    return hashlib.sha256(_blob(doc).encode()).hexdigest()
+
+
+_SLOT = "\0job\0"  # where a job's parameters go in the canonical text of a settings doc
 
 
 def fingerprints(sweep: Sweep, manifest: Any) -> dict[str, str]:
-    """``job_id -> result_fingerprint`` for every row of a manifest (a DataFrame)."""
-    return {
-        str(row["job_id"]): result_fingerprint(sweep, row) for row in manifest.to_dict("records")
-    }
+    """``job_id -> result_fingerprint`` for every row of a manifest (a DataFrame).
+
+    The settings are serialised once per skin type, not once per job: the canonical text is
+    the settings' text with each job's parameters put in their place (the same text, so the
+    same fingerprint, as `result_fingerprint`)."""
+    settings = sweep.settings_dict()
+    frames: dict[str, tuple[str, str]] = {}
+    jobs = json_rows(manifest, _JOB_KEYS, "null")
+    if jobs is None:  # a value the column path does not encode: row by row
+        jobs = [_blob({k: _plain(r[k]) for k in _JOB_KEYS}) for r in manifest.to_dict("records")]
+    out: dict[str, str] = {}
+    for job_id, skin, job in zip(manifest["job_id"].tolist(), manifest["skin_type"].tolist(), jobs):
+        skin = str(skin)
+        if skin not in frames:
+            doc = _settings_doc(sweep, skin, settings)
+            doc["job"] = _SLOT
+            head, tail = _blob(doc).split(json.dumps(_SLOT), 1)
+            frames[skin] = (head, tail)
+        head, tail = frames[skin]
+        out[str(job_id)] = hashlib.sha256((head + job + tail).encode()).hexdigest()
+    return out
 
 
 def _digest(pairs: Any) -> str:

@@ -15,13 +15,48 @@ from __future__ import annotations
 
 import os
 import socket
+import stat
 import time
 from pathlib import Path
 
 from ..core.errors import StoreError
 from ..core.layout import RunLayout
 
-__all__ = ["StorePaths"]
+__all__ = ["StorePaths", "check_store_dir", "refuse_store_target"]
+
+
+def check_store_dir(d: Path) -> None:
+    """StoreError unless ``d`` (a directory of the run) is missing or a real directory: a
+    symbolic link would lead the store's writes and deletions out of the run directory."""
+    try:
+        mode = os.lstat(d).st_mode
+    except FileNotFoundError:
+        return
+    if stat.S_ISLNK(mode):
+        raise StoreError(
+            f"{d}: a symbolic link; the run's own directories must be directories inside it "
+            "(replace the link with a directory)"
+        )
+    if not stat.S_ISDIR(mode):
+        raise StoreError(f"{d}: exists and is not a directory (move it away)")
+
+
+def refuse_store_target(run_dir: str | Path, path: str | Path, option: str) -> None:
+    """StoreError when an output ``path`` would land in the store of ``run_dir`` (its
+    results, fields, logs, temporaries, set-aside files or mesh cache) or on its sweep,
+    manifest, provenance or lock: a command's output must not replace a stored file."""
+    layout = RunLayout(Path(run_dir).resolve())
+    target = Path(path).resolve()
+    dirs = (
+        layout.results_dir, layout.fields_dir, layout.logs_dir, layout.tmp_dir,
+        layout.corrupt_dir, layout.meshes_dir,
+    )  # fmt: skip
+    files = (layout.sweep, layout.manifest, layout.provenance, layout.lock)
+    if target in files or any(target == d or d in target.parents for d in dirs):
+        raise StoreError(
+            f"{option} {path}: inside the store of {run_dir} (it would replace or mix with "
+            "stored files; write elsewhere)"
+        )
 
 
 class StorePaths:
@@ -54,9 +89,8 @@ class StorePaths:
 
     def ensure_dirs(self) -> None:
         dirs = (self.results_dir, self.fields_dir, self.logs_dir, self.tmp_dir)
-        for d in dirs:  # all checked before any is made: a refused run changes nothing
-            if d.exists() and not d.is_dir():
-                raise StoreError(f"{d}: exists and is not a directory (move it away)")
+        for d in (*dirs, self.corrupt_dir, self.layout.meshes_dir):
+            check_store_dir(d)  # all checked before any is made: a refused run changes nothing
         for d in dirs:
             d.mkdir(parents=True, exist_ok=True)
 
@@ -78,6 +112,8 @@ class StorePaths:
         removed = 0
         now = time.time()
         candidates: list[Path] = []
+        for d in (self.tmp_dir, self.results_dir, self.fields_dir):
+            check_store_dir(d)  # never delete through a link out of the run directory
         if self.tmp_dir.is_dir():
             candidates += list(self.tmp_dir.iterdir())
         for d in (self.results_dir, self.fields_dir):
@@ -94,9 +130,12 @@ class StorePaths:
                 except (ValueError, PermissionError):
                     pass
             try:
-                old = now - p.stat().st_mtime > max_age_s
+                st = os.lstat(p)  # a link is judged (and removed) itself, never its target
             except FileNotFoundError:
                 continue
+            if stat.S_ISDIR(st.st_mode):
+                continue
+            old = now - st.st_mtime > max_age_s
             if dead or old:
                 try:
                     p.unlink()

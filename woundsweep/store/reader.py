@@ -132,7 +132,9 @@ def read_parquet_file(path: str | Path, **kwargs: Any) -> pa.Table:
     """One Parquet file as a table. `pq.read_table` reads ``x=y`` parts of the path as hive
     partitions and adds their columns, so a store under ``/data/exp=1`` would not match its
     schema; a `ParquetFile` is the file alone, whatever the path."""
-    with pq.ParquetFile(path, **kwargs) as pf:
+    # Opened by Python, not by path: pyarrow encodes a path as UTF-8 whatever the filesystem
+    # encoding, so a non-ASCII path under a C locale would not open.
+    with open(path, "rb") as fh, pq.ParquetFile(fh, **kwargs) as pf:
         return pf.read()
 
 
@@ -153,7 +155,8 @@ def store_file_names(meta: Mapping[str, Any], job_id: str | None = None) -> tupl
 def read_footer(path: Path) -> dict[str, Any] | None:
     """The footer record alone (cheap: the Parquet footer), or None if it cannot be read."""
     try:
-        raw = (pq.read_schema(path).metadata or {}).get(META_KEY)
+        with open(path, "rb") as fh:  # by Python: a non-UTF-8 path opens (read_parquet_file)
+            raw = (pq.read_schema(fh).metadata or {}).get(META_KEY)
         meta = json.loads(raw)  # type: ignore[arg-type]  # None raises TypeError: caught below
     except Exception:  # noqa: BLE001 - damaged files are the full validator's to name
         return None

@@ -27,6 +27,7 @@ from ..core.schema import UNITS, MeshData, StageStatus
 
 __all__ = [
     "CLOSURE_LINE_DATASETS",
+    "FINGERPRINT_ATTR",
     "MESH_DATASETS",
     "MESH_GROUP",
     "PROFILE_DATASETS",
@@ -36,6 +37,7 @@ __all__ = [
     "read_solver_file",
     "stage_group",
     "stage_of_group",
+    "stamp_fingerprint",
     "write_solver_file",
 ]
 
@@ -62,6 +64,9 @@ CLOSURE_LINE_DATASETS = (
     "contact_force_per_length_mN_per_mm",
 )
 _STAGE_GROUP = re.compile(r"stage_(\d+)")
+# The root attribute `woundsweep solve` stamps: the result fingerprint (`store.identity`) of
+# the settings the file was solved with, so a viewer can refuse a file of an earlier sweep.
+FINGERPRINT_ATTR = "result_fingerprint"
 
 
 def stage_group(stage: int) -> str:
@@ -117,6 +122,21 @@ def write_solver_file(
                     s.create_dataset(name, data=data, compression="gzip")
                 for name, data in (extra or {}).get(stage, {}).items():
                     s.create_dataset(name, data=data)
+
+    atomic_write(path, _write)
+
+
+def stamp_fingerprint(path: str | Path, fingerprint: str) -> None:
+    """Record ``fingerprint`` as the `FINGERPRINT_ATTR` of the solver file ``path`` (a copy
+    with the attribute replaces the file atomically)."""
+    import shutil
+
+    import h5py
+
+    def _write(tmp: str) -> None:
+        shutil.copyfile(path, tmp)
+        with h5py.File(tmp, "r+") as f:
+            f.attrs[FINGERPRINT_ATTR] = fingerprint
 
     atomic_write(path, _write)
 

@@ -251,8 +251,15 @@ class Store(StoreTriage):
         }
         table = table.replace_schema_metadata({META_KEY: json.dumps(meta).encode()})
         path = self.result_path(job_id)
-        atomic_write(path, lambda tmp: pq.write_table(table, tmp, write_page_checksum=True))
+        atomic_write(path, lambda tmp: _write_parquet(table, tmp))
         return path
+
+
+def _write_parquet(table: pa.Table, tmp: str) -> None:
+    sink = pa.BufferOutputStream()  # bytes written by Python: pyarrow takes a path (or a
+    pq.write_table(table, sink, write_page_checksum=True)  # file's name) as UTF-8 only
+    with open(tmp, "wb") as fh:
+        fh.write(memoryview(sink.getvalue()))
 
 
 def _write_mesh(tmp: str, mesh: Any, digest: str, spec: GeometrySpec) -> None:

@@ -7,7 +7,7 @@ WS      := $(VENV)/bin/woundsweep
 DEMO_DIR ?= runs/demo
 PYTEST_ARGS ?=
 
-.PHONY: setup test-deps test test-fast test-dolfinx-latest demo bench bench-convergence lint format clean
+.PHONY: setup test-deps test test-fast test-dolfinx-latest verify demo bench bench-convergence lint format clean
 
 setup:
 	@bash scripts/setup.sh
@@ -17,8 +17,11 @@ setup:
 test-deps:
 	@bash scripts/test-deps.sh
 
+# One pytest worker per core (pytest-xdist), each taking whole test files so that a file's
+# fixtures are built once; PYTEST_WORKERS=0 runs in one process.
+PYTEST_WORKERS ?= auto
 test: setup test-deps
-	$(PY) -m pytest -q --durations=25 $(PYTEST_ARGS)
+	$(PY) -m pytest -q -n $(PYTEST_WORKERS) --dist loadfile --durations=25 $(PYTEST_ARGS)
 
 # Tests that do not need DOLFINx (seconds).
 test-fast: setup
@@ -28,6 +31,12 @@ test-fast: setup
 # /var/cache/woundsweep, ~3 min and 3.5 GB on first use; needs root), compared with 0.5.2.
 test-dolfinx-latest: setup
 	bash scripts/dolfinx-latest.sh $(if $(PYTEST_ARGS),-- $(PYTEST_ARGS))
+
+# The verification cases (docs/validation.md, "Verification"): VERIFY_ARGS=--quick is CI's
+# minute-scale subset; without it the full set (a few minutes on two cores).
+VERIFY_ARGS ?=
+verify: setup
+	$(WS) verify $(VERIFY_ARGS)
 
 DEMO_STAGES ?= 1-6
 DEMO_FIELDS ?= all

@@ -19,7 +19,8 @@
 # Environment: DOLFINX_LATEST_SUITE (Debian suite, default sid = DOLFINx 0.11; trixie = 0.9),
 #   WOUNDSWEEP_SID_ROOT (default /var/cache/woundsweep/SUITE-root),
 #   WOUNDSWEEP_SID_MIRROR (default http://deb.debian.org/debian), DOLFINX_LATEST_DEMO=0 skips the
-#   demo solve, DOLFINX_LATEST_MARKERS (pytest -m expression, default "fem";
+#   demo solve, DOLFINX_LATEST_VERIFY=0 skips `woundsweep verify --quick`,
+#   DOLFINX_LATEST_MARKERS (pytest -m expression, default "fem";
 #   tests/execution/test_slurm.py and tests/execution/test_slurm_cluster.py are always left
 #   out: they need SLURM on the host),
 #   DOLFINX_LATEST_TIMEOUT (seconds for the whole in-root run, default 1500),
@@ -208,6 +209,15 @@ python3 -m pytest -m "$markers" --ignore=tests/execution/test_slurm.py --ignore=
     || rc=$?
 [[ $rc -eq 5 ]] && { echo "dolfinx-latest: no fem tests collected"; rc=0; }
 echo "dolfinx-latest: fem tests: $(($(date +%s) - t0)) s, status $rc"
+# The verification cases' quick subset on this DOLFINx (docs/validation.md, "Verification"):
+# a DOLFINx that changes the physics fails here with the case that moved.
+if [[ ${DOLFINX_LATEST_VERIFY:-1} != 0 ]]; then
+    t0=$(date +%s)
+    vrc=0
+    woundsweep verify --quick || vrc=$?
+    echo "dolfinx-latest: verify --quick: $(($(date +%s) - t0)) s, status $vrc"
+    ((rc == 0 && vrc != 0)) && rc=$vrc
+fi
 if [[ ${DOLFINX_LATEST_DEMO:-1} != 0 ]]; then
     STAGES=$(python3 -c "$STAGES_PY" 2>/dev/null || echo 1-6)
     t0=$(date +%s)

@@ -89,7 +89,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("config",),
     ("mesh", "contact", "solver", "store"),
     ("physics",),
-    ("execution", "studies", "analysis", "viz"),
+    ("execution", "studies", "analysis", "viz", "verify"),
     ("cli", "clitypes", "commands", "__main__"),
 )
 RANK = {unit: rank for rank, units in enumerate(LAYERS) for unit in units}

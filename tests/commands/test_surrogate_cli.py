@@ -136,3 +136,147 @@ def test_metrics_and_report_hold_coverage_failure_and_sobol(analyzed: Path) -> N
     for stem in ("sobol", "surrogate_test"):
         assert (a / f"{stem}.png").read_bytes()[:4] == b"\x89PNG"
     assert (a / "surrogate_meta.json").is_file() and not (a / "failure_model.json").exists()
+
+
+def _copy_analysis(analyzed: Path, dest: Path) -> Path:
+    """A model directory holding a copy of the run's analysis files (no run: no stale check)."""
+    import shutil
+
+    shutil.copytree(analyzed / "analysis", dest)
+    return dest
+
+
+def test_predict_labels_every_number_and_says_what_it_rests_on(analyzed: Path, run_main) -> None:
+    row = _training_row(analyzed, "wedge")
+    rc, out, err = run_main("predict", analyzed, *_args(row))
+    assert rc == 0, err
+    sur = json.loads((analyzed / "analysis" / "surrogate_meta.json").read_text())
+    n_cal = sum(len(v) for v in sur["calibration_scores_log"].values())
+    assert (
+        f"split-conformal on {n_cal} calibration rows of {sur['calibration_geometries']} geometries"
+        in out
+    )
+    assert "p99 of the volume (stress surrogate):" in out and "quantile class (classifier):" in out
+    assert "class probabilities (class:probability): 1:" in out and "p = [" not in out
+    rc, out, _ = run_main("predict", analyzed, *_args(row), "--json")
+    answer = json.loads(out)
+    pred = answer["predictions"][0]
+    edges = json.loads((analyzed / "analysis" / "model_geometry_meta.json").read_text())[
+        "quantile_edges_kPa"
+    ]
+    k = pred["estimate_quantile"]
+    assert edges[k - 1] <= pred["stress_kPa"] < edges[k] or k in (1, len(edges) - 1)
+    assert answer["basis"]["calibration_rows"] == n_cal
+
+
+def test_an_extrapolated_answer_has_no_interval(analyzed: Path, run_main) -> None:
+    row = _training_row(analyzed, "wedge")
+    far = _args(row, wound_width_factor=1.9)
+    rc, _, err = run_main("predict", analyzed, *far)
+    assert rc == 2 and "--allow-extrapolation" in err
+    rc, out, err = run_main("predict", analyzed, *far, "--allow-extrapolation", "--json")
+    assert rc == 0, err
+    pred = json.loads(out)["predictions"][0]
+    assert pred["extrapolated"] and pred["interval_kPa"] == [None, None]
+    assert "extrapolated" in pred["interval_note"] and pred["stress_kPa"] > 0
+    rc, out, _ = run_main("predict", analyzed, *far, "--allow-extrapolation")
+    assert "interval: none: extrapolated" in out and "EXTRAPOLATED" in out
+
+
+@pytest.mark.parametrize(
+    "change, needle",
+    [
+        ({"dermal_thickness_mm": -1.0}, "dermal_thickness_mm=-1 (must be positive)"),
+        ({"wound_depth_factor": 1.0}, "wound_depth_factor=1 (a fraction of the thickness"),
+        ({"wound_depth_factor": 1.5}, "wound_depth_factor=1.5"),
+        ({"wound_width_factor": 0.0}, "wound_width_factor=0 (must be positive)"),
+    ],
+)
+def test_impossible_wounds_are_refused_even_when_extrapolating(
+    analyzed: Path, run_main, change: dict, needle: str
+) -> None:
+    row = _training_row(analyzed, "wedge")
+    rc, out, err = run_main("predict", analyzed, *_args(row, **change), "--allow-extrapolation")
+    assert rc == 2 and out == "" and len(err.strip().splitlines()) == 1
+    assert "not a possible wound" in err and needle in err
+
+
+def test_an_excision_of_length_factor_one_is_refused() -> None:
+    from woundsweep.analysis.prediction import check_physical
+    from woundsweep.core.errors import AnalysisError
+
+    with pytest.raises(AnalysisError, match=r"wound_length_factor=1 \(a multiple of the width"):
+        check_physical({"wound_length_factor": 1.0, "wound_depth_factor": 0.5})
+    check_physical({"wound_length_factor": 3.0, "wound_depth_factor": 0.5})  # a possible one
+
+
+def test_an_angle_outside_the_trained_ones_is_refused_in_the_users_terms(
+    analyzed: Path, tmp_path: Path, run_main
+) -> None:
+    d = _copy_analysis(analyzed, tmp_path / "a")
+    meta_path = d / "model_geometry_meta.json"
+    meta = json.loads(meta_path.read_text())
+    meta["ranges"]["wedge"]["orientation_deg"] = [90.0, 90.0]  # trained along the Langer line
+    meta_path.write_text(json.dumps(meta))
+    row = _training_row(analyzed, "wedge")
+    args = [a for a in _args(row) if a not in ("--orientation", str(row["orientation_deg"]))]
+    rc, _, err = run_main("predict", d / "model_geometry.json", *args, "--angle-to-langer", "25")
+    assert rc == 2
+    assert "angle to the Langer line 25 deg (trained on 0..0 deg)" in err
+    assert "orientation_deg" not in err
+
+
+def _damaged_variants() -> list[tuple[str, str, object]]:
+    """(file, key, damage): every top-level key of each metadata file removed or set to null,
+    plus the classes round 4 found (a count of 0, a missing surrogate booster, nesting)."""
+    keys = {
+        "model_geometry_meta.json": [
+            "scheme", "quantiles", "features", "stages", "quantile_edges_kPa",
+            "skin_codes_c_kPa", "ranges", "levels",
+        ],
+        "surrogate_meta.json": ["calibration_scores_log", "features", "ranges"],
+        "failure_model_meta.json": ["statement"],
+    }  # fmt: skip
+    out: list[tuple[str, str, object]] = []
+    for name, ks in keys.items():
+        for k in ks:
+            out += [(name, k, "remove"), (name, k, None)]
+    out += [
+        ("model_geometry_meta.json", "quantiles", 0),
+        ("model_geometry_meta.json", "quantiles", "8"),
+        ("model_geometry_meta.json", "quantile_edges_kPa", [1.0, 2.0]),
+        ("model_geometry_meta.json", "ranges", {"wedge": {"wound_width_factor": [1]}}),
+        ("surrogate_meta.json", "calibration_scores_log", {"1": ["x"]}),
+        ("surrogate.json", "", "delete"),
+        ("model_geometry_meta.json", "", "nested"),
+        ("model_geometry.json", "", "garbage"),
+    ]
+    return out
+
+
+def test_damaged_analysis_files_give_one_line(analyzed: Path, tmp_path: Path, run_main) -> None:
+    """Every damaged variant: exit 2 and one line on stderr, never a traceback."""
+    row = _training_row(analyzed, "wedge")
+    variants = _damaged_variants()
+    assert len(variants) >= 18
+    for i, (name, key, damage) in enumerate(variants):
+        d = _copy_analysis(analyzed, tmp_path / f"v{i}")
+        path = d / name
+        if damage == "delete":
+            path.unlink()
+        elif damage == "nested":
+            path.write_text('{"format": ' + "[" * 100000 + "]" * 100000 + "}")
+        elif damage == "garbage":
+            path.write_text("{not json")
+        else:
+            meta = json.loads(path.read_text())
+            if damage == "remove":
+                del meta[key]
+            else:
+                meta[key] = damage
+            path.write_text(json.dumps(meta))
+        rc, out, err = run_main("predict", d / "model_geometry.json", *_args(row))
+        lines = err.strip().splitlines()
+        assert rc == 2 and len(lines) == 1 and lines[0].startswith("woundsweep: error:"), (
+            name, key, damage, rc, err[-400:],
+        )  # fmt: skip

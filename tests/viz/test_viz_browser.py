@@ -138,7 +138,14 @@ def test_view_renders_and_switches_stage(driver, site, tmp_path: Path) -> None:
     assert driver.execute_script(
         "return document.getElementById('plot').data[0].cmax;"
     ) == pytest.approx(1.15 * p99, rel=1e-6)
-    assert bar["ticktext"][-2].startswith("p99 ") and bar["ticktext"][-1].startswith("> p99")
+    assert bar["ticktext"][-2].startswith("p99 ") and bar["ticktext"][-1].startswith("max ")
+    # The band above p99 is shaded: the cells above it keep their order (the centre shows).
+    shown, vm = driver.execute_script(
+        "var t=document.getElementById('plot').data[0]; return [t.intensity, t.customdata];"
+    )
+    above = [(v, s) for v, s in zip(vm, shown) if v > p99]
+    assert above and len({s for _, s in above}) > 1
+    assert [s for _, s in sorted(above)] == sorted(s for _, s in above)
     # "colour scale to the maximum": the stage's surface maximum is the top.
     driver.execute_script("document.getElementById('fullrange').click();")
     cmax = {}
@@ -178,7 +185,9 @@ def test_view_renders_and_switches_stage(driver, site, tmp_path: Path) -> None:
         == "no profile lines stored"
     )
     names = driver.execute_script("return document.getElementById('plot').data.map(t => t.name);")
-    assert names == ["surface", "closure zone", "max von Mises"]
+    assert names == ["surface", "closure zone", "largest cell mean"]
+    note = driver.find_element("id", "note").text
+    assert "largest cell mean" in note and "p99 of the volume" in note and "largest sample" in note
     assert console_errors(driver) == []
 
 
@@ -244,3 +253,70 @@ def test_atlas_job_page_draws_with_shared_plotly(driver, site, tmp_path: Path) -
     assert "no result stored yet" in driver.find_element("css selector", "p.noview").text
     assert console_errors(driver) == []
     assert np.isfinite(colour)
+
+
+def _boxes(driver, plot: str) -> dict[str, list[float]]:
+    """Screen rectangles [left, top, right, bottom] of a 2D plot's legend, x-axis title and
+    title (absent ones left out)."""
+    return driver.execute_script(
+        "var out={}, p=document.getElementById(arguments[0]);"
+        "[['legend','.legend'],['xtitle','.g-xtitle'],['title','.g-gtitle']].forEach(function(s){"
+        " var e=p.querySelector(s[1]); if(!e) return; var b=e.getBoundingClientRect();"
+        " if(b.width>0&&b.height>0) out[s[0]]=[b.left,b.top,b.right,b.bottom];});"
+        "return out;",
+        plot,
+    )
+
+
+def _overlap(a: list[float], b: list[float]) -> bool:
+    return a[0] < b[2] and b[0] < a[2] and a[1] < b[3] and b[1] < a[3]
+
+
+@pytest.mark.system
+def test_profile_plots_do_not_overprint_at_1280x900(driver, site, tmp_path: Path) -> None:
+    """At 1,280 x 900 the legends of the profile and line-load plots overlap neither their
+    x-axis titles nor their titles (on a view with three profile lines and both line loads).
+    The rectangle check is shown to fail on a legend placed under the axis."""
+    from woundsweep.viz.jobdata import open_job
+    from woundsweep.viz.view import view_page
+
+    jf = open_job(site["run"], 0)
+    y = np.linspace(-2.0, 2.0, 100)
+    line = {"points_mm": np.c_[np.zeros(100), y, np.zeros(100)], "von_mises_kPa": 10 + y**2}
+    profiles = {6: {n: line for n in ("along_wound", "through_thickness", "across_patch")}}
+    yc = np.linspace(-1.5, 1.5, 7)
+    closure = {
+        6: {
+            "closure_line_y_mm": yc,
+            "closing_force_per_length_mN_per_mm": 5 - yc**2,
+            "contact_force_per_length_mN_per_mm": 1 + 0 * yc,
+        }
+    }
+    page = tmp_path / "lines.html"
+    page.write_text(view_page(jf._replace(profiles=profiles, closure_lines=closure)))
+    driver.set_window_size(1280, 900)
+    w, h = driver.execute_script("return [window.innerWidth, window.innerHeight]")
+    driver.set_window_size(2 * 1280 - w, 2 * 900 - h)  # the viewport is 1,280 x 900
+    try:
+        console_errors(driver)
+        _load(driver, page)
+        _wait(driver, _DRAWN)
+        _wait(driver, "return document.querySelector('#closure .legend') !== null;")
+        time.sleep(0.5)
+        _shot(driver, "view-1280x900.png", tmp_path)
+        for plot in ("lines", "closure"):
+            boxes = _boxes(driver, plot)
+            assert {"legend", "xtitle", "title"} <= set(boxes), (plot, boxes)
+            for a, b in (("legend", "xtitle"), ("legend", "title"), ("xtitle", "title")):
+                assert not _overlap(boxes[a], boxes[b]), (plot, a, b, boxes)
+        # The old placement (a horizontal legend just under the plot) fails the check.
+        driver.execute_script(
+            "Plotly.relayout('lines', {'legend.orientation': 'h', 'legend.x': 0, "
+            "'legend.xanchor': 'left', 'legend.y': -0.2, 'legend.yanchor': 'top'});"
+        )
+        time.sleep(0.3)
+        boxes = _boxes(driver, "lines")
+        assert _overlap(boxes["legend"], boxes["xtitle"]), boxes
+        assert console_errors(driver) == []
+    finally:
+        driver.set_window_size(1400, 1000)

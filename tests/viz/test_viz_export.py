@@ -20,6 +20,7 @@ from woundsweep.config.paper import ClosureZone
 from woundsweep.core.schema import DERMIS, SUBCUTIS, WOUND_TAGS
 from woundsweep.mesh.cache import load_mesh, mesh_path
 from woundsweep.viz.surface import closure_zone_facets, surface_of
+from woundsweep.viz.vtkfiles import units_of
 
 vtk = pytest.importorskip("vtk", reason="vtk (the independent VTU reader) is not installed")
 from vtk_render import render_surface  # noqa: E402
@@ -42,11 +43,6 @@ def _read_grid(grid) -> dict[str, np.ndarray]:
     for data in (grid.GetPointData(), grid.GetCellData()):
         for i in range(data.GetNumberOfArrays()):
             out[data.GetArrayName(i)] = vtk_to_numpy(data.GetArray(i))
-    units = grid.GetFieldData().GetAbstractArray("units")
-    if units is not None:
-        out["units"] = dict(
-            units.GetValue(i).split(": ", 1) for i in range(units.GetNumberOfValues())
-        )
     return out
 
 
@@ -125,12 +121,12 @@ def test_round_trip_read_by_vtk(store: Path, tmp_path: Path, capsys) -> None:
         np.testing.assert_array_equal(srf["displacement_mm"], u[surf.nodes])
         np.testing.assert_array_equal(srf["facet_tag"], mesh.facet_tags)
         np.testing.assert_array_equal(srf["closure_zone"], zone.astype(np.int32))
-        # Units ride along in the field data, one per array.
-        assert vol["units"]["cauchy_stress_kPa"] == "kPa" and vol["units"]["det_F"] == "1"
-        assert srf["units"]["displacement_mm"] == "mm"
-        assert set(srf["units"]) == {
-            k for k in srf if k not in ("points", "types", "conn", "units")
-        }
+        # Units ride along in a comment of each VTU, one per array.
+        vol_units = units_of((out / "job-0" / f"job-0_stage{k}_volume.vtu").read_text("latin-1"))
+        srf_units = units_of((out / "job-0" / f"job-0_stage{k}_surface.vtu").read_text("latin-1"))
+        assert vol_units["cauchy_stress_kPa"] == "kPa" and vol_units["det_F"] == "1"
+        assert srf_units["displacement_mm"] == "mm"
+        assert set(srf_units) == {k for k in srf if k not in ("points", "types", "conn")}
         # Derived fields against the solver's own constitutive law (physics.materials).
         _check_derived(vol, mesh, u, job, run)
         flank = np.isin(mesh.facet_tags, WOUND_TAGS)

@@ -20,10 +20,18 @@ from ..core.errors import AnalysisError
 from ..core.layout import RunLayout
 from ..core.schema import StageStatus
 from ..store.reader import read_results
-from .settings import REQUIRED_COLUMNS, SHAPE_CODES, STRESS, model_features
+from .settings import (
+    DUPLICATE_COLUMNS,
+    DUPLICATE_RTOL,
+    REQUIRED_COLUMNS,
+    SHAPE_CODES,
+    STRESS,
+    model_features,
+)
 
 __all__ = [
     "drop_orphans",
+    "duplicate_states",
     "encode_features",
     "load_results",
     "require_columns",
@@ -99,19 +107,65 @@ def _flag(df: pd.DataFrame, name: str) -> pd.Series:
     return pd.to_numeric(df[name], errors="coerce").astype(float)
 
 
+def duplicate_states(rows: pd.DataFrame, stress: str = STRESS) -> np.ndarray:
+    """Per row: True where it repeats an earlier stage's state of the same job (``stress``
+    and each `DUPLICATE_COLUMNS` entry the rows have, finite in both, within
+    `DUPLICATE_RTOL` relative; a column missing or NaN in either row does not decide)."""
+    cols = [stress, *(c for c in DUPLICATE_COLUMNS if c in rows and c != stress)]
+    values = np.column_stack(
+        [pd.to_numeric(rows[c], errors="coerce").to_numpy(float) for c in cols]
+    )
+    job = rows["job_id"].astype(str).to_numpy()
+    order = np.lexsort((rows["stage"].to_numpy(), job))
+    dup = np.zeros(len(rows), dtype=bool)
+    start = 0
+    while start < len(order):
+        end = start
+        while end < len(order) and job[order[end]] == job[order[start]]:
+            end += 1
+        idx = order[start:end]
+        for a in range(1, len(idx)):
+            v = values[idx[a]]
+            for b in range(a):
+                w = values[idx[b]]
+                both = np.isfinite(v) & np.isfinite(w)
+                tol = DUPLICATE_RTOL * np.maximum(np.abs(v), np.abs(w))
+                if both[0] and np.all(np.abs(v - w)[both] <= tol[both]):
+                    dup[idx[a]] = True
+                    break
+        start = end
+    return dup
+
+
 def select_rows(
-    df: pd.DataFrame, drop_interpenetrating: bool = False, keep_reopened: bool = False
+    df: pd.DataFrame,
+    drop_interpenetrating: bool = False,
+    keep_reopened: bool = False,
+    keep_duplicates: bool = False,
+    stress: str = STRESS,
 ) -> tuple[pd.DataFrame, dict[str, Any]]:
-    """Converged rows with a finite, positive maximal stress, without the rows whose sutured
-    zone has reopened (``closed`` = 0) unless ``keep_reopened``, and without the rows whose
-    flanks interpenetrate if ``drop_interpenetrating``; and the row counts."""
+    """Converged rows with a finite, positive ``stress``, without the rows whose sutured
+    zone has reopened (``closed`` = 0) unless ``keep_reopened``, without the rows that repeat
+    an earlier stage's state (`duplicate_states`) unless ``keep_duplicates``, and without the
+    rows whose flanks interpenetrate if ``drop_interpenetrating``; and the row counts."""
+    if stress not in df:
+        raise AnalysisError(f"no column {stress!r} in the result store")
     converged = df["status"].astype(str) == StageStatus.CONVERGED.value
-    stress = pd.to_numeric(df[STRESS], errors="coerce")
-    positive = converged & np.isfinite(stress) & (stress > 0)
+    stress_values = pd.to_numeric(df[stress], errors="coerce")
+    positive = converged & np.isfinite(stress_values) & (stress_values > 0)
     overlap = positive & (_flag(df, "interpenetrating") == 1)
     reopened = positive & (_flag(df, "closed") == 0)
     drop = (overlap & drop_interpenetrating) | (reopened & (not keep_reopened))
-    rows = df[positive & ~drop].reset_index(drop=True)
+    duplicate = pd.Series(False, index=df.index)
+    kept = positive & ~drop
+    twice = df[kept].duplicated(["job_id", "stage"])
+    if twice.any():
+        raise AnalysisError(
+            f"the result store has {int(twice.sum())} duplicate (job_id, stage) rows"
+        )
+    if kept.any():
+        duplicate[kept] = duplicate_states(df[kept], stress)
+    rows = df[kept & ~(duplicate & (not keep_duplicates))].reset_index(drop=True)
     counts = {
         "store_rows": int(len(df)),
         "jobs": int(df["job_id"].nunique()),
@@ -121,6 +175,15 @@ def select_rows(
         "interpenetrating_dropped": bool(drop_interpenetrating),
         "reopened_rows": int(reopened.sum()),
         "reopened_dropped": not keep_reopened,
+        "duplicate_rows": int(duplicate.sum()),
+        "duplicate_dropped": not keep_duplicates,
+        "duplicate_rule": (
+            f"{stress} and {', '.join(c for c in DUPLICATE_COLUMNS if c in df)} within "
+            f"{DUPLICATE_RTOL:g} relative of an earlier stage of the job"
+        ),
+        "distinct_geometries": int(rows["geometry_id"].nunique())
+        if "geometry_id" in rows
+        else None,
         "status": {
             str(k): int(v) for k, v in df["status"].astype(str).value_counts().sort_index().items()
         },
@@ -134,9 +197,6 @@ def select_rows(
         )
     if rows.empty:
         raise AnalysisError("no converged row has a positive, finite maximal stress")
-    dup = rows.duplicated(["job_id", "stage"])
-    if dup.any():
-        raise AnalysisError(f"the result store has {int(dup.sum())} duplicate (job_id, stage) rows")
     return rows, counts
 
 

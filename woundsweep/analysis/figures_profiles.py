@@ -67,7 +67,10 @@ def profile_max_locations(
 ) -> Figure:
     """Figure 2 (profile lines): histograms of the position of each line's maximum, with the
     closure zone's ends dashed along the wound (``None``: no common ends, as for excisions,
-    whose zone and patch scale with each one's length)."""
+    whose zone and patch scale with each one's length). A run with more than one
+    ``closure_load`` (how stages 3-6 closed the wound) shows each one's bars side by side."""
+    loads = sorted(set(pos["closure_load"])) if "closure_load" in pos else ["reactions"]
+    loads = loads or ["reactions"]
     fig = Figure(figsize=(10, 9), layout="constrained")
     axes = fig.subplots(
         len(STAGE_GROUPS) + 1, 3, squeeze=False, height_ratios=[0.8] + [1] * len(STAGE_GROUPS)
@@ -78,9 +81,15 @@ def profile_max_locations(
         for i, (group, _) in enumerate(STAGE_GROUPS, start=1):
             ax = axes[i, j]
             sel = pos[pos["stage_group"] == group]
-            counts, _out = profile_counts(sel[f"{line}_index"].to_numpy(dtype=float), line)
-            ax.bar(edges[:-1], counts, np.diff(edges), align="edge",
-                   color="tab:red" if i == 2 else "tab:blue")  # fmt: skip
+            width = np.diff(edges) / len(loads)
+            for n, load in enumerate(loads):  # side by side when a run has several
+                part = sel[sel["closure_load"] == load] if len(loads) > 1 else sel
+                counts, _out = profile_counts(part[f"{line}_index"].to_numpy(dtype=float), line)
+                colour = f"C{n}" if len(loads) > 1 else ("tab:red" if i == 2 else "tab:blue")
+                ax.bar(edges[:-1] + n * width, counts, width, align="edge", color=colour,
+                       label=f"closure load: {load}")  # fmt: skip
+            if len(loads) > 1 and i == 1 and j == 0:
+                ax.legend(fontsize=7)
             ax.set_xlim(edges[0], edges[-1])
             if line == "along_wound" and zone_ends is not None:
                 for v in zone_ends:

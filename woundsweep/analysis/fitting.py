@@ -16,7 +16,7 @@ from .. import __version__
 from ..config.analysis import ModelSettings
 from ..core.errors import AnalysisError
 from ..core.versions import MODEL_FORMAT
-from .evaluation import evaluate, feature_importance
+from .evaluation import auc_interval, evaluate, feature_importance
 from .settings import FEATURES, SCHEMES, SHAPE_CODES, STRESS, model_features
 from .splits import (
     Split,
@@ -141,6 +141,10 @@ def fit_scheme(
         **{name: evaluate(y[idx], probs[name]) for name, idx in split._asdict().items()},
         "importance": feature_importance(trained.booster),
     }
+    test_geoms = rows["geometry_id"].to_numpy()[split.test]
+    metrics["test"]["auc_macro_interval"] = auc_interval(
+        y[split.test], probs["test"], test_geoms, settings.seed
+    )
     train_rows = rows.iloc[split.train]
     meta = {
         "format": MODEL_FORMAT,

@@ -12,6 +12,7 @@ the failure model's its statement and the store's failure rate (`FAILURE_FORMAT`
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, NamedTuple
 
@@ -31,6 +32,7 @@ __all__ = [
     "FAILURE_STEM",
     "SURROGATE_STEM",
     "LoadedModel",
+    "check_model",
     "json_bytes",
     "load_model",
     "resolve_model_path",
@@ -105,7 +107,7 @@ def _read_booster(path: Path) -> xgb.Booster:
 def _read_meta(path: Path, fmt: str, what: str) -> dict[str, Any]:
     try:
         meta = json.loads(path.read_text())
-    except (OSError, ValueError):
+    except (OSError, ValueError, RecursionError):  # RecursionError: a deeply nested file
         raise AnalysisError(f"{path}: missing or unreadable model metadata") from None
     if not isinstance(meta, dict) or meta.get("format") != fmt:
         raise AnalysisError(f"{path}: not a woundsweep {what} description")
@@ -118,6 +120,8 @@ def _companion(directory: Path, stem: str, fmt: str, what: str) -> tuple[Any, di
         return None
     meta = _read_meta(meta_path, fmt, what)
     model_path = directory / f"{stem}.json"
+    if not model_path.is_file() and stem == SURROGATE_STEM:  # a surrogate is always saved whole
+        raise AnalysisError(f"{model_path}: missing (its metadata {meta_path.name} is there)")
     return (_read_booster(model_path) if model_path.is_file() else None), meta
 
 
@@ -139,6 +143,92 @@ def resolve_model_path(path: str | Path, scheme: str | None = None) -> Path:
             " give a run directory after `woundsweep analyze`, its analysis/ or a model file"
         )
     raise AnalysisError(f"{p}: no trained model found (run `woundsweep analyze {p}` first)")
+
+
+def _number(v: Any) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+
+def _span_map(v: Any) -> bool:
+    """shape -> column -> [lo, hi] (numbers)."""
+    return isinstance(v, dict) and all(
+        isinstance(cols, dict)
+        and all(
+            isinstance(r, list) and len(r) == 2 and all(_number(x) for x in r)
+            for r in cols.values()
+        )
+        for cols in v.values()
+    )
+
+
+def _levels_map(v: Any) -> bool:
+    """shape -> column -> sorted grid values or null."""
+    return isinstance(v, dict) and all(
+        isinstance(cols, dict)
+        and all(
+            g is None or (isinstance(g, list) and all(_number(x) for x in g)) for g in cols.values()
+        )
+        for cols in v.values()
+    )
+
+
+def _strings(v: Any) -> bool:
+    return isinstance(v, list) and all(isinstance(x, str) for x in v)
+
+
+def _scores(v: Any) -> bool:
+    """stage (digits) -> calibration scores (numbers)."""
+    return isinstance(v, dict) and all(
+        isinstance(k, str) and k.isdigit() and isinstance(x, list) and all(_number(y) for y in x)
+        for k, x in v.items()
+    )
+
+
+def _problem(meta: dict[str, Any], checks: dict[str, Any]) -> str | None:
+    for key, ok in checks.items():
+        if key not in meta:
+            return f"no {key!r}"
+        if not ok(meta[key]):
+            return f"a malformed {key!r}"
+    return None
+
+
+def check_model(model: LoadedModel) -> None:
+    """Check every field `predict` reads in the model's files (`AnalysisError` naming the
+    file and the field otherwise): a damaged file that keeps its format tag is one line."""
+    meta = model.meta
+    q = meta.get("quantiles")
+    checks = {
+        "scheme": lambda v: isinstance(v, str),
+        "quantiles": lambda v: isinstance(v, int) and not isinstance(v, bool) and v >= 2,
+        "features": lambda v: _strings(v) and "stage" in v,
+        "stages": lambda v: isinstance(v, list) and bool(v) and all(isinstance(x, int) for x in v),
+        "quantile_edges_kPa": lambda v: (
+            isinstance(v, list)
+            and len(v) == (q if isinstance(q, int) else -2) + 1
+            and all(_number(x) for x in v)
+        ),
+        "skin_codes_c_kPa": lambda v: (
+            isinstance(v, dict) and bool(v) and all(_number(x) for x in v.values())
+        ),
+        "ranges": _span_map,
+        "levels": _levels_map,
+    }
+    problem = _problem(meta, checks)
+    if problem:
+        raise AnalysisError(f"{model.path.with_name(model.path.stem + '_meta.json')}: {problem}")
+    if model.surrogate is not None:
+        sur = {"calibration_scores_log": _scores, "features": _strings, "ranges": _span_map}
+        problem = _problem(model.surrogate[1], sur)
+        if problem:
+            raise AnalysisError(f"{model.path.with_name(SURROGATE_STEM + '_meta.json')}: {problem}")
+    if model.failure is not None:
+        fail = {"statement": lambda v: isinstance(v, str)}
+        if model.failure[0] is not None:
+            fail["features"] = _strings
+        problem = _problem(model.failure[1], fail)
+        if problem:
+            raise AnalysisError(f"{model.path.with_name(FAILURE_STEM + '_meta.json')}: {problem}")
 
 
 def load_model(path: str | Path, scheme: str | None = None) -> LoadedModel:

@@ -47,8 +47,17 @@ def stiff_vs_soft(rows: pd.DataFrame) -> tuple[dict[str, Any], pd.DataFrame]:
         greater = int((p["stiff_kPa"] > p["soft_kPa"]).sum())
         less = int((p["stiff_kPa"] < p["soft_kPa"]).sum())
         n = len(p)
+        # The pairs of one geometry (its stages, orientations) are not independent: the
+        # geometry-level test counts each geometry once, by the sign of its median difference.
+        med = (p["stiff_kPa"] - p["soft_kPa"]).groupby(p["geometry_id"]).median()
+        g_up, g_down = int((med > 0).sum()), int((med < 0).sum())
         out[shape] = {
             "pairs": n,
+            "geometries": int(len(med)),
+            "geometries_stiff_greater": g_up,
+            "sign_test_p_geometries": float(binomtest(g_up, g_up + g_down, 0.5).pvalue)
+            if g_up + g_down
+            else None,
             "stiff_greater": greater,
             "soft_greater": less,
             "ties": n - greater - less,

@@ -96,11 +96,15 @@ def run_analysis(
     echo: Callable[[str], None] | None = None,
     drop_interpenetrating: bool = False,
     keep_reopened: bool = False,
+    keep_duplicates: bool = False,
+    stress: str = STRESS,
 ) -> AnalysisOutput:
     """Fit and evaluate each scheme; write metrics, models, figures and report.md.
 
     Settings: `ModelSettings` defaults, then the run's ``Sweep.analysis``, then ``overrides``.
     ``echo`` receives a line before each long step (training takes minutes on 70k rows).
+    ``stress`` is the store's column the models learn (a von Mises statistic in kPa); the
+    steps below read it under `STRESS`, and metrics.json and the model files name it.
     """
     say = echo or (lambda _line: None)
     import xgboost as xgb
@@ -123,7 +127,14 @@ def run_analysis(
     results, orphans = drop_orphans(load_results(rd, run), run)
     degree = rows_element_degree(results)
     record = trained_on(run, results)
-    rows, counts = select_rows(results, drop_interpenetrating, keep_reopened)
+    column = stress
+    if not (column.endswith("_kPa") and "von_mises" in column):
+        raise AnalysisError(f"--stress {column}: expected a von Mises column in kPa")
+    rows, counts = select_rows(
+        results, drop_interpenetrating, keep_reopened, keep_duplicates, column
+    )
+    if column != STRESS:  # the steps below read the target under its default name
+        rows = rows.assign(**{STRESS: rows[column]})
     counts["rows_not_in_manifest"] = orphans
     if len(rows) < MIN_ROWS_PER_QUANTILE * q:
         raise AnalysisError(
@@ -142,11 +153,11 @@ def run_analysis(
     svs, pairs = stiff_vs_soft(rows)
     locs = normalised_locations(rows)
     pos = profile_positions(rows)
-    stress = rows[STRESS].to_numpy(dtype=np.float64)
+    target = rows[STRESS].to_numpy(dtype=np.float64)
     metrics: dict[str, Any] = {
         "woundsweep_version": __version__,
         "xgboost_version": xgb.__version__,
-        "stress": STRESS,
+        "stress": column,
         "stress_units": "kPa",
         "element_degree": degree,
         "element": element_name(degree) if degree is not None else "unknown",
@@ -158,10 +169,10 @@ def run_analysis(
         "trained_on": record,
         "rows": counts,
         "stress_summary_kPa": {
-            "min": float(stress.min()),
-            "median": float(np.median(stress)),
-            "max": float(stress.max()),
-            "all_rows_quantile_edges": np.quantile(stress, np.linspace(0, 1, q + 1)).tolist(),
+            "min": float(target.min()),
+            "median": float(np.median(target)),
+            "max": float(target.max()),
+            "all_rows_quantile_edges": np.quantile(target, np.linspace(0, 1, q + 1)).tolist(),
         },
         "schemes": {f.scheme: f.metrics for f in fits},
         "surrogate": surrogate_metrics,
@@ -176,6 +187,7 @@ def run_analysis(
     files: list[Path] = []
     for f in fits:
         f.meta["trained_on"] = record  # predict compares it with the run it answers for
+        f.meta["stress"] = column
         files += save_model(out, f)
     if surrogate is not None:
         files += save_companions(out, surrogate, failure)
@@ -185,7 +197,7 @@ def run_analysis(
     excisions = bool((rows["wound_shape"].astype(str) == "fusiform").any())
     zone_ends = None if excisions else (1 / 3, 2 / 3)
     stage = rows["stage"].to_numpy()
-    figs = figures.write_all(out, fits, stress, stage, pairs, svs, locs, zone_ends)
+    figs = figures.write_all(out, fits, target, stage, pairs, svs, locs, zone_ends)
     figs += figures.save(profile_max_locations(pos, zone_ends), out, "max_location_profiles")
     ratios, _ = matched_ratios(rows)
     if not ratios.empty:

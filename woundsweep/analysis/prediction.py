@@ -47,8 +47,10 @@ ANGLE = "orientation_deg"
 
 class Prediction(NamedTuple):
     """One stage's answer: quantile 1..q, class probabilities, that quantile's stress range;
-    the surrogate's estimate and interval at ``level`` (kPa; a ``None`` bound is unbounded:
-    too few calibration rows for the level), ``None`` without a surrogate."""
+    the surrogate's estimate and interval at ``level`` (kPa; ``None`` bounds: no interval,
+    ``interval_note`` says why: too few calibration rows for the level, or an extrapolated
+    answer, which the calibration does not cover), ``None`` without a surrogate; the
+    quantile class the surrogate's estimate falls in (``estimate_quantile``)."""
 
     stage: int
     quantile: int
@@ -58,6 +60,8 @@ class Prediction(NamedTuple):
     stress_kPa: float | None = None
     interval_kPa: tuple[float | None, float | None] | None = None
     level: float | None = None
+    interval_note: str = ""
+    estimate_quantile: int | None = None
 
 
 class WoundPrediction(NamedTuple):
@@ -73,6 +77,9 @@ class WoundPrediction(NamedTuple):
     mesh_size_factor: float | None = None
     mesh_size_default: bool = False
     orientation_weights: list[tuple[float, float]] = []
+    # What the answer rests on (`answer_basis`): training rows and ranges, calibration rows
+    # and geometries.
+    basis: dict[str, Any] = {}
 
 
 def _check_factors(params: Mapping[str, Any]) -> str:
@@ -113,8 +120,59 @@ def finest_mesh(meta: dict[str, Any], shape: str) -> float:
     return float(span[1])
 
 
+# What `generate` accepts (docs/sweeps.md): no model answers a wound that cannot exist.
+_POSITIVE = (
+    "dermal_thickness_mm",
+    "subcutis_thickness_factor",
+    "patch_size_factor",
+    "wound_width_factor",
+    "mesh_size_factor",
+)
+
+
+def check_physical(params: Mapping[str, Any]) -> None:
+    """Refuse (`AnalysisError`, with or without --allow-extrapolation) a wound the sweep file
+    could not describe: a length or factor that must be positive and is not, a width factor
+    above 2, a depth factor of 1 or more (the depth is a fraction of the thickness), an
+    excision's length factor of 1 or less (its length is a multiple of its width), a negative
+    cylinder offset, a mesh size factor above the finest (2)."""
+
+    def get(name: str) -> float | None:
+        v = params.get(name)
+        return None if v is None else float(v)
+
+    problems = [
+        f"{n}={get(n):g} (must be positive)"
+        for n in _POSITIVE
+        if get(n) is not None and get(n) <= 0  # type: ignore[operator]
+    ]
+    width, mesh = get("wound_width_factor"), get("mesh_size_factor")
+    depth, length, aspect = (
+        get("wound_depth_factor"), get("wound_length_factor"), get("wound_aspect_factor")
+    )  # fmt: skip
+    if width is not None and width > 2:
+        problems.append(f"wound_width_factor={width:g} (at most 2: the wound must fit the patch)")
+    if mesh is not None and mesh > 2:
+        problems.append(f"mesh_size_factor={mesh:g} (at most 2, the finest the mesher takes)")
+    if depth is not None and not 0 < depth < 1:
+        problems.append(f"wound_depth_factor={depth:g} (a fraction of the thickness: 0 to 1)")
+    if length is not None and length <= 1:
+        problems.append(f"wound_length_factor={length:g} (a multiple of the width: above 1)")
+    if aspect is not None and aspect < 0:
+        problems.append(f"wound_aspect_factor={aspect:g} (must not be negative)")
+    if problems:
+        raise AnalysisError("not a possible wound: " + "; ".join(problems))
+
+
+def _in_terms(name: str, v: float, lo: float, hi: float, angle_to_langer: bool) -> str:
+    """A flag for ``name`` = ``v`` outside [lo, hi], in the terms the user gave it."""
+    if name == ANGLE and angle_to_langer:
+        return f"angle to the Langer line {90 - v:g} deg (trained on {90 - hi:g}..{90 - lo:g} deg)"
+    return f"{name}={v:g} (trained on {lo:g}..{hi:g})"
+
+
 def _check_params(
-    meta: dict[str, Any], params: Mapping[str, Any]
+    meta: dict[str, Any], params: Mapping[str, Any], angle_to_langer: bool = False
 ) -> tuple[dict[str, float], list[str]]:
     """Encode one parameter set; list what lies outside the training data."""
     shape = _check_columns(meta, _check_factors(params))
@@ -147,7 +205,7 @@ def _check_params(
         lo, hi = ranges[name]
         tol = 1e-9 * max(1.0, abs(lo), abs(hi))
         if not lo - tol <= float(v) <= hi + tol:
-            flagged.append(f"{name}={float(v):g} (trained on {lo:g}..{hi:g})")
+            flagged.append(_in_terms(name, float(v), lo, hi, angle_to_langer))
     return values, flagged
 
 
@@ -210,6 +268,7 @@ def predict_wound(
     stages: Sequence[int] | None = None,
     allow_extrapolation: bool = False,
     level: float = 0.9,
+    angle_to_langer: bool = False,
 ) -> WoundPrediction:
     """Predict one wound for the given stages (default: all trained).
 
@@ -218,21 +277,25 @@ def predict_wound(
     ``mesh_size_factor`` ``None`` for the finest trained). Values outside the training data
     are refused unless ``allow_extrapolation``, and then flagged in each `Prediction`;
     ``level`` in (0, 1) is the interval's nominal coverage. An orientation between two
-    trained ones weighs their answers linearly (`angle_weights`).
+    trained ones weighs their answers linearly (`angle_weights`). A wound that cannot exist
+    (`check_physical`) is refused either way; ``angle_to_langer``: the user gave the
+    orientation as the angle to the Langer line, and the flags say it so. An extrapolated
+    answer has no interval (the calibration holds inside the training data only).
     """
     if not 0.0 < float(level) < 1.0:
         raise AnalysisError(f"interval level {level}: expected a value between 0 and 1")
     meta = model.meta
     shape = _check_columns(meta, _check_factors(params))
+    check_physical(params)
     params = dict(params)
     default_mesh = params.get("mesh_size_factor") is None
     if default_mesh:
         params["mesh_size_factor"] = finest_mesh(meta, shape)
-    values, flagged = _check_params(meta, params)
+    values, flagged = _check_params(meta, params, angle_to_langer)
     if model.surrogate is not None:  # its training rows may differ (the random split's do)
         sur_meta: dict[str, Any] = {**meta, **{k: model.surrogate[1][k] for k in ("ranges", "features")
                                if k in model.surrogate[1]}}  # fmt: skip
-        own = _check_params(sur_meta, params)[1]
+        own = _check_params(sur_meta, params, angle_to_langer)[1]
         flagged += [f"surrogate: {f}" for f in own if f not in flagged]
     stages = list(meta["stages"]) if stages is None else [int(s) for s in stages]
     out_of_range_stages = [s for s in stages if s not in meta["stages"]]
@@ -264,18 +327,52 @@ def predict_wound(
         p = p / p.sum()
         k = int(np.argmax(p))
         flags = flagged + [f for f, st in zip(stage_flags, out_of_range_stages) if st == s]
+        interval = None if bounds is None else bounds[i]
+        why = ""
+        if interval is not None and interval[0] is None:
+            why = "unbounded: too few calibration rows for the level"
+        if flags and interval is not None:
+            interval, why = (None, None), "none: extrapolated, outside what the calibration covers"
+        est_class = None
+        if estimate is not None:
+            j = int(np.searchsorted(edges, estimate[i], side="right"))
+            est_class = int(np.clip(j, 1, len(edges) - 1))
         out.append(
             Prediction(
                 int(s), k + 1, [float(v) for v in p], (edges[k], edges[k + 1]), flags,
                 None if estimate is None else estimate[i],
-                None if bounds is None else bounds[i],
+                interval,
                 None if estimate is None else float(level),
+                why,
+                est_class,
             )
         )  # fmt: skip
     return WoundPrediction(
         out, p_fail, note, interpolation_flags(meta, params),
         float(params["mesh_size_factor"]), default_mesh, weights,
+        answer_basis(model, shape, stages),
     )  # fmt: skip
+
+
+def answer_basis(model: LoadedModel, shape: str, stages: Sequence[int]) -> dict[str, Any]:
+    """What an answer rests on: the classifier's training rows and the shape's training
+    ranges; the surrogate's training rows, its calibration rows (in all and per asked stage)
+    and geometries (``None`` where a model file does not record them)."""
+    meta = model.meta
+    out: dict[str, Any] = {
+        "classifier_training_rows": meta.get("training_rows"),
+        "training_ranges": meta["ranges"].get(shape, {}),
+    }
+    if model.surrogate is not None:
+        sur = model.surrogate[1]
+        scores = sur["calibration_scores_log"]
+        out.update(
+            surrogate_training_rows=sur.get("training_rows"),
+            calibration_rows=sum(len(v) for v in scores.values()),
+            calibration_rows_by_stage={str(s): len(scores.get(str(s), [])) for s in stages},
+            calibration_geometries=sur.get("calibration_geometries"),
+        )
+    return out
 
 
 def _surrogate_log(

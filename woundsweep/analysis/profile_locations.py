@@ -57,14 +57,18 @@ def _fraction(line: str, at_mm: np.ndarray, rows: pd.DataFrame) -> np.ndarray:
 def profile_positions(rows: pd.DataFrame) -> pd.DataFrame:
     """Per row its stage group and, per line, the sample index (0..99) of the line's maximum.
 
-    Columns ``stage_group`` and ``<line>_index`` (float, NaN where the row stores no position
-    for that line: a stage that did not converge, or a line that missed the mesh).
+    Columns ``stage_group``, ``closure_load`` (``reactions`` where the store has no such
+    column) and ``<line>_index`` (float, NaN where the row stores no position for that line:
+    a stage that did not converge, or a line that missed the mesh).
     """
     stage = rows["stage"].to_numpy()
     group = np.full(len(rows), "", dtype=object)
     for name, stages in STAGE_GROUPS:
         group[np.isin(stage, stages)] = name
     out = pd.DataFrame({"stage_group": group})
+    # How the stages 3-6 closed the wound (a store without the column: the reactions).
+    load = rows["closure_load"] if "closure_load" in rows else pd.Series("reactions", rows.index)
+    out["closure_load"] = load.fillna("reactions").astype(str).to_numpy()
     for line in PROFILE_LINES:
         at = rows[f"profile_{line}_max_at_mm"].to_numpy(dtype=float)
         out[f"{line}_index"] = _fraction(line, at, rows) * (PROFILE_POINTS - 1)

@@ -144,6 +144,7 @@ def fit_surrogate(rows: pd.DataFrame, X: np.ndarray, settings: ModelSettings) ->
         "best_iteration": best,
         "settings": dataclasses.asdict(settings),
         "training_rows": int(len(split.train)),
+        "calibration_geometries": int(rows["geometry_id"].iloc[cal].nunique()),
         "woundsweep_version": __version__,
     }
     return SurrogateFit(booster, split, pred, metrics, meta)

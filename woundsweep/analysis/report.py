@@ -10,7 +10,7 @@ from ..core.fsutil import atomic_write_bytes
 from .mesh_sensitivity import report_lines as mesh_report_lines
 from .profile_locations import report_lines as profile_report_lines
 
-__all__ = ["PAPER", "render_report", "write_report"]
+__all__ = ["PAPER", "auc_text", "render_report", "summary", "write_report"]
 
 # The paper's statements that the analysis can check (Results, Figure 3).
 PAPER: dict[str, Any] = {
@@ -26,6 +26,71 @@ def _f(x: float | None, fmt: str = ".3f") -> str:
 
 def _yes(ok: bool | None) -> str:
     return "n/a" if ok is None else ("yes" if ok else "**no**")
+
+
+def auc_text(m: dict[str, Any]) -> str:
+    """The macro AUC (2 decimals) with its 95% interval over the test geometries."""
+    auc = m["test"]["auc_macro"]
+    if auc is None:
+        return "n/a"
+    ci = m["test"].get("auc_macro_interval", {})
+    n = ci.get("geometries")
+    if ci.get("ci95"):
+        lo, hi = ci["ci95"]
+        return f"{auc:.2f} (95% {lo:.2f}-{hi:.2f} over {n} test geometries)"
+    return f"{auc:.2f} (no interval: {n} test geometry)" if n is not None else f"{auc:.2f}"
+
+
+def summary(metrics: dict[str, Any]) -> list[str]:
+    """The report's opening paragraph in plain words: what the model found, how good it is,
+    and what it rests on."""
+    rows = metrics["rows"]
+    out = [
+        f"The models learn `{metrics['stress']}`, the stress that 99% of the tissue's volume "
+        f"stays below, from {rows['used_rows']:,} distinct stage results of {rows['jobs']:,} jobs"
+        + (
+            f" on {rows['distinct_geometries']:,} geometries"
+            if rows.get("distinct_geometries")
+            else ""
+        )
+        + (
+            f" ({rows['duplicate_rows']:,} rows that repeat an earlier stage's state "
+            f"{'left out' if rows.get('duplicate_dropped', True) else 'kept'})."
+            if "duplicate_rows" in rows
+            else "."
+        )
+    ]
+    sur = metrics.get("surrogate", {})
+    if "sensitivity" in sur:
+        top = sur["sensitivity"]["ranking_total"][:2]
+        out.append(f"What drives the stress most: {' and '.join(top)} (Sobol total index).")
+    geo = metrics["schemes"].get("geometry") or next(iter(metrics["schemes"].values()), None)
+    if geo is not None:
+        out.append(
+            f"On wounds it never saw, the classifier ranks a wound's stress class with a "
+            f"macro AUC of {auc_text(geo)} (0.5 is chance, 1 perfect) and names the exact "
+            f"class {100 * geo['test']['accuracy']:.0f}% of the time, within one class "
+            f"{100 * geo['test']['within_one_quantile']:.0f}%."
+        )
+    if "test" in sur:
+        cov = sur["test"]["coverage"].get("0.8") or next(iter(sur["test"]["coverage"].values()))
+        out.append(
+            f"The stress estimate's 80% interval held for {100 * (cov['empirical'] or 0):.0f}% "
+            f"of {cov['rows']} test rows from {sur['split_geometries']['test']} geometries "
+            f"(about {cov['median_width_factor'] or float('nan'):.2g}x from its low to its high end)."
+        )
+    svs = metrics["stiff_vs_soft"]
+    for shape, st in svs.items():
+        out.append(
+            f"Stiff skin carries more stress than soft in {100 * st['fraction_stiff_greater']:.0f}% "
+            f"of {st['pairs']} {shape} pairs from {st.get('geometries', '?')} geometries."
+        )
+    if rows["used_rows"] < 1000 or (geo is not None and geo["split_geometries"]["test"] < 10):
+        out.append(
+            "This is a small run: read the numbers as a check that the pipeline works, not "
+            "as findings."
+        )
+    return out
 
 
 def render_report(metrics: dict[str, Any], figures: Sequence[str]) -> str:
@@ -58,6 +123,10 @@ def render_report(metrics: dict[str, Any], figures: Sequence[str]) -> str:
     lines = [
         "# woundsweep analysis report",
         "",
+        "## Summary",
+        "",
+        " ".join(summary(metrics)),
+        "",
         f"Element: {metrics.get('element', 'unknown')}; every number below is of this element.",
         "",
         f"Maximal stress = `{metrics['stress']}` (kPa). Rows: {rows['store_rows']} in the store "
@@ -68,6 +137,17 @@ def render_report(metrics: dict[str, Any], figures: Sequence[str]) -> str:
         f"{', left out' if rows.get('reopened_dropped', True) else ', kept'}; rows whose "
         f"mirrored zone points overlap: {rows.get('interpenetrating_rows', 0)}"
         f"{', left out' if rows.get('interpenetrating_dropped') else ', kept'}.",
+        *(
+            [
+                f"Rows that repeat an earlier stage's state of their job ({rows['duplicate_rule']}): "
+                f"{rows['duplicate_rows']}"
+                f"{', left out (`analyze --keep-duplicates` keeps them)' if rows.get('duplicate_dropped', True) else ', kept'}: "
+                "one state counted once, so the tests below do not count it as several "
+                "independent results."
+            ]
+            if "duplicate_rows" in rows
+            else []
+        ),
         "",
         "## Stress-quantile model (test rows; Figure 3)",
         "",
@@ -80,14 +160,17 @@ def render_report(metrics: dict[str, Any], figures: Sequence[str]) -> str:
                 f"{m['split_rows'][k]:,}" for k in ("train", "validation", "test")
             ),
         ),
-        row("macro-average AUC", "> 0.85", lambda m: _f(m["test"]["auc_macro"])),
-        row("micro-average AUC", "> 0.85", lambda m: _f(m["test"]["auc_micro"])),
-        row("lowest per-quantile AUC", "> 0.85", lambda m: _f(min_auc(m))),
+        row("test geometries", "not given", lambda m: str(m["split_geometries"]["test"])),
+        row("macro-average AUC (95% over test geometries)", "> 0.85", auc_text),
+        row("micro-average AUC", "> 0.85", lambda m: _f(m["test"]["auc_micro"], ".2f")),
+        row("lowest per-quantile AUC", "> 0.85", lambda m: _f(min_auc(m), ".2f")),
         row("every AUC > 0.85?", "yes", auc_ok),
         row(
             "accuracy / within one quantile",
             "not given",
-            lambda m: f"{_f(m['test']['accuracy'])} / {_f(m['test']['within_one_quantile'])}",
+            lambda m: (
+                f"{_f(m['test']['accuracy'], '.2f')} / {_f(m['test']['within_one_quantile'], '.2f')}"
+            ),
         ),
         row(
             "log loss (train / validation / test)",
@@ -109,9 +192,20 @@ def render_report(metrics: dict[str, Any], figures: Sequence[str]) -> str:
         "",
         "## Stiff against soft skin (same geometry, orientation and stage)",
         "",
-        "| wound shape | paper | ours | sign test p |",
-        "|---|---|---|---|",
+        "The pairs of one geometry (its stages and orientations) are not independent, so "
+        "the last column tests the geometries, each counted once by the sign of its median "
+        "difference.",
+        "",
+        "| wound shape | paper | ours | sign test p (pairs) | geometries: stiff greater, p |",
+        "|---|---|---|---|---|",
     ]
+
+    def by_geometry(st: dict[str, Any] | None) -> str:
+        if st is None or "geometries" not in st:
+            return "n/a"
+        gp = st["sign_test_p_geometries"]
+        return f"{st['geometries_stiff_greater']}/{st['geometries']}, p = {_f(gp, '.2g')}"
+
     svs = metrics["stiff_vs_soft"]
     for shape, (k, n) in PAPER["stiff_soft"].items():
         st = svs.get(shape)
@@ -122,13 +216,16 @@ def render_report(metrics: dict[str, Any], figures: Sequence[str]) -> str:
         )
         p = "n/a" if st is None or st["sign_test_p"] is None else f"{st['sign_test_p']:.2g}"
         label = "cylindrical (paper: curved)" if shape == "cylindrical" else shape
-        lines.append(f"| {label} | {100 * k / n:.1f}% ({k:,}/{n:,}), p < 0.001 | {ours} | {p} |")
+        lines.append(
+            f"| {label} | {100 * k / n:.1f}% ({k:,}/{n:,}), p < 0.001 | {ours} | {p} "
+            f"| {by_geometry(st)} |"
+        )
     for shape in sorted(set(svs) - set(PAPER["stiff_soft"])):  # the excision: not in the paper
         st = svs[shape]
         p = "n/a" if st["sign_test_p"] is None else f"{st['sign_test_p']:.2g}"
         lines.append(
             f"| {shape} | not in the paper | {100 * st['fraction_stiff_greater']:.1f}% "
-            f"({st['stiff_greater']:,}/{st['pairs']:,}) | {p} |"
+            f"({st['stiff_greater']:,}/{st['pairs']:,}) | {p} | {by_geometry(st)} |"
         )
     lines += surrogate_lines(metrics)
     if "max_location_profiles" in metrics:
@@ -239,7 +336,29 @@ def importance_table(metrics: dict[str, Any]) -> list[str]:
             f"| {g} | {_f(c and c['weight'], '.0f')} | {_f(c and c['total_gain'], '.4g')} "
             f"| {_f(sg.get('total_gain'), '.4g')} | {shap[g]:.4f} | {s1} | {st} |"
         )
+    lines += zero_index_notes(idx)
     return lines
+
+
+# Why a parameter's Sobol index can be zero by construction (not for lack of data).
+SCALE_NOTE = (
+    "dermal_thickness_mm: every length of the model is a multiple of t_d (the subcutis, the "
+    "patch, the wound, the mesh through its size law), the materials have no length scale and "
+    "the loads are stresses, so the stresses do not depend on t_d: a stress model is "
+    "scale-invariant in it, and its index is zero by construction, whatever the data."
+)
+
+
+def zero_index_notes(idx: dict[str, Any]) -> list[str]:
+    """A note for each parameter whose Sobol total index is near zero, with the reason where
+    the model's construction gives one (`SCALE_NOTE`)."""
+    zero = [g for g, v in idx.items() if v.get("ST") is not None and abs(v["ST"]) < 0.005]
+    if not zero:
+        return []
+    out = ["", f"Total index below 0.005: {', '.join(sorted(zero))}."]
+    if "dermal_thickness_mm" in zero:
+        out.append(SCALE_NOTE)
+    return out
 
 
 def write_report(path: str | Path, metrics: dict[str, Any], figures: Sequence[str]) -> None:

@@ -22,6 +22,8 @@ __all__ = [
     "LOCATION_COLUMNS",
     "CONVERGENCE_FAILURES",
     "COVERAGE_LEVELS",
+    "DUPLICATE_COLUMNS",
+    "DUPLICATE_RTOL",
     "JOB_FEATURES",
     "MIN_FAILED_JOBS",
     "SHAPE_FACTORS",
@@ -102,6 +104,12 @@ JOB_FEATURES: tuple[str, ...] = tuple(f for f in FEATURES if f != "stage")
 CONVERGENCE_FAILURES = (FailureClass.NOT_CONVERGED.value, FailureClass.TIMEOUT.value)
 # Fewer failed (or converged) jobs than this train no failure model; the report says so.
 MIN_FAILED_JOBS = 10
+# A row repeats an earlier stage's state of its job when each of these columns (those the
+# store has, finite in both) agrees within DUPLICATE_RTOL relative (stages 4-6 re-solve stage
+# 3's loads, and where the contact does not engage they end in the same state). Such rows
+# are one state counted several times: left out of the models unless kept.
+DUPLICATE_COLUMNS = ("max_von_mises_kPa", "min_J", "closure_gap_max_mm", "contact_force_mN")
+DUPLICATE_RTOL = 1e-6
 
 
 def model_features(shapes: Iterable[object]) -> tuple[str, ...]:

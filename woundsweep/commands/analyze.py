@@ -27,17 +27,22 @@ def _pct(x: float | None) -> str:
 
 
 def summary_lines(metrics: dict[str, Any]) -> list[str]:
+    from ..analysis.report import auc_text
+
     """A few lines for the terminal: rows, per-scheme scores, stiff vs soft."""
     rows = metrics["rows"]
+    dup = rows.get("duplicate_rows", 0)
     lines = [
-        f"rows: {rows['used_rows']} used of {rows['store_rows']} ({rows['converged_rows']} converged)"
+        f"rows: {rows['used_rows']} used of {rows['store_rows']} ({rows['converged_rows']} "
+        f"converged; {dup} repeating an earlier stage's state "
+        f"{'left out' if rows.get('duplicate_dropped', True) else 'kept'})"
     ]
     for scheme, m in metrics["schemes"].items():
         t = m["test"]
         sizes = "/".join(str(m["split_rows"][k]) for k in ("train", "validation", "test"))
-        auc = "n/a" if t["auc_macro"] is None else f"{t['auc_macro']:.3f}"
+        auc = auc_text(m)
         lines.append(
-            f"{scheme:>8} split ({sizes}): test macro AUC {auc}, accuracy {t['accuracy']:.3f}, "
+            f"{scheme:>8} split ({sizes}): test macro AUC {auc}, accuracy {t['accuracy']:.2f}, "
             f"best round {m['best_iteration'] + 1}, top features {', '.join(m['importance']['ranking_weight'][:2])}"
         )
     sur = metrics.get("surrogate", {})
@@ -56,7 +61,8 @@ def summary_lines(metrics: dict[str, Any]) -> list[str]:
     lines.append(f"failure model: {metrics.get('failure', {}).get('statement', 'n/a')}")
     for shape, st in metrics["stiff_vs_soft"].items():
         lines.append(
-            f"stiff > soft ({shape}): {100 * st['fraction_stiff_greater']:.1f}% of {st['pairs']} pairs"
+            f"stiff > soft ({shape}): {100 * st['fraction_stiff_greater']:.1f}% of {st['pairs']} pairs "
+            f"from {st.get('geometries', '?')} geometries"
         )
     return lines
 
@@ -88,6 +94,15 @@ def summary_lines(metrics: dict[str, Any]) -> list[str]:
     "--keep-reopened", is_flag=True,
     help="Keep the rows whose sutured zone has reopened (closed = 0); left out by default.",
 )  # fmt: skip
+@click.option(
+    "--keep-duplicates", is_flag=True,
+    help="Keep the rows that repeat an earlier stage's state of their job (within 1e-6 "
+    "relative); left out by default, and counted in the report.",
+)  # fmt: skip
+@click.option(
+    "--stress", "stress", default="p99_von_mises_kPa", show_default=True, metavar="COLUMN",
+    help="The store's von Mises column (kPa) the models learn.",
+)  # fmt: skip
 def cmd(
     run_dir: Path,
     quantiles: int | None,
@@ -97,6 +112,8 @@ def cmd(
     params: tuple[str, ...],
     drop_interpenetrating: bool,
     keep_reopened: bool,
+    keep_duplicates: bool,
+    stress: str,
 ) -> None:
     """Fit the stress-quantile model (XGBoost) and write RUN_DIR/analysis/.
 
@@ -137,6 +154,8 @@ def cmd(
             echo=step,
             drop_interpenetrating=drop_interpenetrating,
             keep_reopened=keep_reopened,
+            keep_duplicates=keep_duplicates,
+            stress=stress,
         )
         bar.update(bar.total - bar.n)
     except BaseException:

@@ -41,9 +41,13 @@ def cmd(
     multiblock of the volume (tetrahedra) and the exterior surface (triangles).
 
     Point data displacement_mm (Warp By Vector shows the deformed state); cell data with
-    units: von_mises_kPa, cauchy_stress_kPa, principal_stress_kPa, green_lagrange_strain,
-    det_F, cell_tag, and on the surface facet_tag, closure_zone, normal_traction_kPa and
-    contact_pressure_kPa. Which stages exist is decided by `run --fields`; a stage without a
+    units: von_mises_kPa (the cell mean of the solver's samples), inverted (1 where the
+    solver's state has no stress; its stresses written as 0), cell_tag, and as the solver
+    computes them cauchy_stress_kPa, principal_stress_kPa, green_lagrange_strain and det_F
+    (P1 runs; P2 runs only where the fields file holds the solver's cell means); on the
+    surface facet_tag, closure_zone, normal_traction_kPa and contact_pressure_kPa.
+    job-<N>.json says how each array was computed. With --xdmf the .h5 lies beside the
+    .xdmf in DIR/job-<N>/. Which stages exist is decided by `run --fields`; a stage without a
     field is named with the reason. A job without a stored result is read from
     RUN_DIR/solve/job_<N>.h5 when `woundsweep solve` wrote it.
     """
@@ -60,6 +64,9 @@ def cmd(
         check_output_dir(out)
     except ValueError as err:
         raise WoundsweepError(f"--out {err}") from None
+    from ..store.paths import refuse_store_target
+
+    refuse_store_target(run_dir, out, "--out")  # never onto or among the store's files
     run = load_run(run_dir)
     if not all_:
         info = export_job(open_job(run_dir, job, result=result), out, xdmf)

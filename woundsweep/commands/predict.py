@@ -105,6 +105,63 @@ def _warn_if_stale(loaded: LoadedModel) -> None:
             click.echo(one_line(f"woundsweep: warning: {note}"), err=True)
 
 
+def _span(k: int, q: int, lo: float, hi: float) -> str:
+    """A quantile class's stress range; the end classes are open (their outer edge is only the
+    smallest / largest training value)."""
+    if k == 1:
+        return f"below {hi:.4g} kPa (training min {lo:.4g})"
+    if k == q:
+        return f"{lo:.4g} kPa or more (training max {hi:.4g})"
+    return f"{lo:.4g}-{hi:.4g} kPa"
+
+
+def _stage_lines(p: Any, q: int, level: float) -> list[str]:
+    """One stage's answer, every number named: the surrogate's p99 of the volume with its
+    interval, the classifier's quantile class with its probabilities, and why the two differ
+    when they do."""
+    lines = [f"stage {p.stage}:"]
+    if p.stress_kPa is not None:
+        lo, hi = p.interval_kPa or (None, None)
+        rng = f"{lo:.4g}-{hi:.4g} kPa" if lo is not None else (p.interval_note or "none")
+        lines.append(
+            f"  p99 of the volume (stress surrogate): {p.stress_kPa:.4g} kPa; "
+            f"{100 * level:g}% interval: {rng}"
+        )
+    lo, hi = p.stress_range_kPa
+    lines.append(
+        f"  quantile class (classifier): {p.quantile} of {q}, {_span(p.quantile, q, lo, hi)}, "
+        f"probability {p.probabilities[p.quantile - 1]:.2f}"
+    )
+    probs = " ".join(f"{k + 1}:{v:.2f}" for k, v in enumerate(p.probabilities))
+    lines.append(f"  class probabilities (class:probability): {probs}")
+    if p.estimate_quantile is not None and p.estimate_quantile != p.quantile:
+        lines.append(
+            f"  the surrogate's estimate lies in class {p.estimate_quantile}, the classifier's "
+            f"most likely class is {p.quantile}: two models trained apart (the classifier on "
+            "its split's classes, the surrogate on log stress over the geometry split's "
+            "training rows) can disagree; metrics.json and report.md give each one's test "
+            "scores"
+        )
+    return lines
+
+
+def _basis_lines(basis: dict[str, Any], q: int) -> list[str]:
+    """What the answer rests on: training rows and ranges, calibration rows and geometries."""
+    ranges = "; ".join(f"{k} {lo:g}..{hi:g}" for k, (lo, hi) in basis["training_ranges"].items())
+    lines = [f"trained on: {basis.get('classifier_training_rows') or 'an unrecorded number of'} "
+             f"rows (classifier); ranges of the shape: {ranges}"]  # fmt: skip
+    if "calibration_rows" in basis:
+        geoms = basis.get("calibration_geometries")
+        of = f" of {geoms} geometries" if geoms is not None else ""
+        by = ", ".join(f"stage {k}: {n}" for k, n in basis["calibration_rows_by_stage"].items())
+        lines.append(
+            f"interval: split-conformal on {basis['calibration_rows']} calibration rows{of} the "
+            f"surrogate never saw ({by}); it holds on average over new geometries inside the "
+            "training ranges"
+        )
+    return lines
+
+
 @click.command("predict")
 @click.argument("model", type=click.Path(path_type=Path))
 @click.option(
@@ -158,16 +215,22 @@ def cmd(
     finest mesh trained on for the shape (stated).
     """
     from ..analysis import load_model, predict_wound
+    from ..analysis.model_io import check_model
     from ..core.errors import AnalysisError
 
     params = parse_params(shape, skin_type, numeric, angle_to_langer)
-    try:
-        loaded = load_model(model, scheme)
-        q, scheme_name = int(loaded.meta["quantiles"]), str(loaded.meta["scheme"])
-    except (AttributeError, TypeError, KeyError, ValueError) as err:  # e.g. metadata `null`
-        raise AnalysisError(f"{model}: malformed model metadata ({type(err).__name__})") from None
+    loaded = load_model(model, scheme)
+    check_model(loaded)  # every field prediction reads, typed: a damaged file is one line
+    q, scheme_name = int(loaded.meta["quantiles"]), str(loaded.meta["scheme"])
     _warn_if_stale(loaded)
-    answer = predict_wound(loaded, params, list(stages) or None, allow_extrapolation, level)
+    try:
+        answer = predict_wound(
+            loaded, params, list(stages) or None, allow_extrapolation, level,
+            angle_to_langer=angle_to_langer is not None,
+        )  # fmt: skip
+    except (AttributeError, TypeError, KeyError, ValueError, IndexError) as err:
+        # check_model reads what it knows of; a model file damaged past it is still one line.
+        raise AnalysisError(f"{model}: damaged model files ({type(err).__name__})") from None
     preds = answer.stages
     if as_json:
         out = {
@@ -184,10 +247,13 @@ def cmd(
             "orientation_weights": [list(p) for p in answer.orientation_weights],
             "mesh_size_factor": answer.mesh_size_factor,
             "mesh_size_factor_default": answer.mesh_size_default,
+            "basis": answer.basis,
         }
         click.echo(json.dumps(out, indent=1))
         return
     click.echo(f"model: {loaded.path} ({scheme_name} split, {q} quantiles)")
+    for line in _basis_lines(answer.basis, q):
+        click.echo(line)
     angle = params["orientation_deg"]
     how = "the finest trained, none given" if answer.mesh_size_default else "given"
     click.echo(
@@ -195,21 +261,8 @@ def cmd(
         f"mesh_size_factor {answer.mesh_size_factor:g} ({how})"
     )
     for p in preds:
-        stress = ""
-        if p.stress_kPa is not None:
-            lo, hi = p.interval_kPa or (None, None)
-            rng = "unbounded: too few calibration rows" if lo is None else f"{lo:.4g}-{hi:.4g} kPa"
-            stress = f"stress {p.stress_kPa:.4g} kPa ({100 * level:g}% interval {rng}); "
-        lo, hi = p.stress_range_kPa
-        # The end classes are open: their outer edge is only the smallest / largest training value.
-        if p.quantile == 1:
-            span = f"< {hi:.4g} kPa (training min {lo:.4g})"
-        elif p.quantile == q:
-            span = f">= {lo:.4g} kPa (training max {hi:.4g})"
-        else:
-            span = f"{lo:.4g}-{hi:.4g} kPa"
-        probs = " ".join(f"{v:.2f}" for v in p.probabilities)
-        click.echo(f"stage {p.stage}: {stress}quantile {p.quantile}/{q}, {span}, p = [{probs}]")
+        for line in _stage_lines(p, q, level):
+            click.echo(line)
     if answer.failure_probability is None:
         click.echo(f"failure probability: n/a ({answer.failure_note})")
     else:

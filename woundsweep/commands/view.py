@@ -49,6 +49,9 @@ def cmd(run_dir: Path, job: int | None, result: Path | None, out: Path) -> None:
         check_output_file(out)
     except ValueError as err:
         raise WoundsweepError(f"--out {err}") from None
+    from ..store.paths import refuse_store_target
+
+    refuse_store_target(run_dir, out, "--out")  # never onto or among the store's files
     jf = open_job(run_dir, job, result=result)
     job = int(jf.job["job_index"])
     data = view_page(jf).encode("utf-8")

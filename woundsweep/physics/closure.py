@@ -127,12 +127,23 @@ class ClosureLine:
         )
 
     def _per_length(self, f: np.ndarray) -> np.ndarray:
-        """Sum of the x-forces ``f`` (flat dofs) on the left flank's nodes per bin, per mm."""
+        """Sum of the x-forces ``f`` (flat dofs) on the left flank's nodes per bin, per mm.
+
+        A node on an inner bin edge (within a billionth of the wound's extent) gives half its
+        force to each of the two bins, so mirror-image nodes about the wound's mid-line land
+        in mirror-image bins and a symmetric wound has a symmetric profile: with a one-sided
+        rule the zone's end nodes, which lie on edges, fall inward at one end and outward at
+        the other.
+        """
         nodes = self.left_wound_nodes
         fx = f.reshape(-1, 3)[nodes, 0]
         bins = len(self.edges) - 1
-        idx = np.clip(np.searchsorted(self.edges, self.X[nodes, 1], side="right") - 1, 0, bins - 1)
-        total = np.bincount(idx, weights=fx, minlength=bins)
+        y = self.X[nodes, 1]
+        tol = 1e-9 * max(float(self.edges[-1] - self.edges[0]), 1e-12)
+        above = np.clip(np.searchsorted(self.edges, y + tol, side="right") - 1, 0, bins - 1)
+        below = np.clip(np.searchsorted(self.edges, y - tol, side="right") - 1, 0, bins - 1)
+        total = np.bincount(above, weights=0.5 * fx, minlength=bins)
+        total += np.bincount(below, weights=0.5 * fx, minlength=bins)
         return total / np.diff(self.edges)
 
     def line_loads(self, closing: np.ndarray | None, contact: np.ndarray | None) -> LineLoads:

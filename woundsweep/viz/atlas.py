@@ -32,6 +32,7 @@ from ..config.manifest import Run
 from ..config.solver import element_name
 from ..config.sweep import GEOMETRY_KEYS
 from ..core.errors import StoreError
+from ..core.fsutil import read_tail
 from ..core.layout import ANALYSIS_METRICS
 from ..core.schema import STAGES, StageStatus
 from ..store.reader import rows_element_degree
@@ -98,20 +99,24 @@ def _write(path: Path, text: str) -> int:
     from the run and rebuilt at will, and two fsyncs per page would dominate the build."""
     data = text.encode("utf-8")
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    tmp.write_bytes(data)
-    os.replace(tmp, path)
+    try:
+        tmp.write_bytes(data)
+        os.replace(tmp, path)
+    except OSError as err:  # a full disk, `ulimit -f`: no temporary left, the page named
+        tmp.unlink(missing_ok=True)
+        raise OSError(err.errno, err.strerror, str(path)) from None
     return len(data)
 
 
 def log_html(path: Path) -> str:
     """A job log's page block: its path and its last `LOG_BYTES`, escaped."""
-    if not path.exists():
+    if not os.path.lexists(path):
         return '<p class="noview">no log</p>\n'
-    size = path.stat().st_size
-    with open(path, "rb") as fh:
-        if size > LOG_BYTES:
-            fh.seek(size - LOG_BYTES)
-        text = fh.read().decode("utf-8", "replace")
+    try:  # a regular file only: a named pipe or a link there is not read
+        size, tail = read_tail(path, LOG_BYTES)
+    except OSError as err:
+        return f'<p class="noview">log not shown: {escape(str(path))}: {escape(str(err.strerror))}</p>\n'
+    text = tail.decode("utf-8", "replace")
     cut = (
         f"(the last {LOG_BYTES / 1024:.0f} KiB of {size / 1024:.0f} KiB) "
         if size > LOG_BYTES
@@ -315,7 +320,9 @@ def build_atlas(
             else ""
         )
         + '<p class="legend">Click a header to sort; type in the boxes to filter (text: substring; '
-        "numbers: 2, &gt;1, &lt;=0.5 or 1..2). Units are in the column names. "
+        "numbers: 2, &gt;1, &lt;=0.5 or 1..2). Units are in the column names; "
+        "&ldquo;p99 kPa s<i>k</i>&rdquo; is stage <i>k</i>&rsquo;s p99_von_mises_kPa, the p99 of "
+        "the volume (the volume-weighted 99th percentile of von Mises). "
         f"Built {escape(time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime()))} from {escape(str(run.run_dir))}; "
         f"{fmt(len(results.drop_duplicates('job_index')))} jobs stored.</p>\n"
         '<div class="pager" id="pager"></div>\n'

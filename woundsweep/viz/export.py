@@ -12,11 +12,19 @@ surface, a PVD series over the stages, the reference mesh, and a JSON descriptio
 - with ``xdmf=True``, ``job-<index>.xdmf`` + ``.h5``: the volume series in one HDF5 file.
 
 Both blocks carry point data ``displacement_mm`` and cell data (`VOLUME_FIELDS`): the stored
-von Mises and, from the stored displacement (`viz.mechanics`), the Cauchy stress tensor, the
-principal stresses, the Green-Lagrange strain and det F; a surface triangle carries the values
-of the tetrahedron it bounds (no NaN anywhere), its facet tag, the closure zone, the normal
-traction and the contact pressure on the wound's flanks (`SURFACE_FIELDS`). Every VTU names
-the unit of each array in its field data (`vtkfiles.UNITS_ARRAY`).
+von Mises (the cell mean of the solver's samples), ``inverted``, ``cell_tag`` and, computed as
+the solver computes them (`tensor_source`), the Cauchy stress tensor, the principal stresses,
+the Green-Lagrange strain and det F: on a P1 run from the stored displacement (`viz.mechanics`:
+F is constant per cell, so these are the solver's own values and the von Mises of the exported
+tensor is the stored one to float32 rounding); on a P2 run only where the fields file holds
+the solver's cell means (`jobdata.SOLVER_CELL_DATASETS`), since the vertex values of a
+quadratic field do not determine its stress. A cell where the solver's state has no stress
+(det F <= 0, or a non-finite value) is marked ``inverted`` = 1 and its stresses written as 0:
+no exported value is NaN or infinite. A surface triangle carries the values of the tetrahedron
+it bounds, its facet tag, the closure zone, and (with the tensor) the normal traction and the
+contact pressure on the wound's flanks (`SURFACE_FIELDS`). Every name carries its unit; the
+units and how each array was computed are in ``job-<index>.json`` (and, for a reader of the
+XML, in a comment of each VTU).
 """
 
 from __future__ import annotations
@@ -28,21 +36,69 @@ from typing import Any
 import numpy as np
 
 from ..core.schema import CELL_TAGS, FACET_TAGS, STAGE_NAMES, UNITS, WOUND_TAGS
+from .html import CELL_MEAN_MAX, STRESS_LABELS
 from .jobdata import JobFields
 from .mechanics import CellMechanics, cell_mechanics
 from .surface import ExteriorSurface, surface_of
 from .vtkfiles import pvd, vtm, write_text, write_vtu
 
-__all__ = ["SURFACE_FIELDS", "VOLUME_FIELDS", "export_job", "job_dir_name"]
+__all__ = [
+    "SURFACE_FIELDS",
+    "TENSOR_FIELDS",
+    "TENSOR_SOURCES",
+    "VOLUME_FIELDS",
+    "export_job",
+    "job_dir_name",
+    "stage_cell_fields",
+    "tensor_source",
+]
 
 # name -> (unit, meaning): the cell data of the volume block (and of the surface's triangles).
 VOLUME_FIELDS: dict[str, tuple[str, str]] = {
-    "von_mises_kPa": ("kPa", "cellwise von Mises stress, as the solver stored it"),
-    "cauchy_stress_kPa": ("kPa", "Cauchy stress tensor (9 components, symmetric)"),
-    "principal_stress_kPa": ("kPa", "principal Cauchy stresses, largest first"),
+    "von_mises_kPa": (
+        "kPa",
+        "von Mises stress, the cell mean of the solver's samples as stored (P1: the cell's "
+        "constant value; P2: the mean over the degree-4 rule's points); 0 where inverted",
+    ),
+    "cauchy_stress_kPa": (
+        "kPa",
+        "Cauchy stress tensor (9 components, symmetric); 0 where inverted",
+    ),
+    "principal_stress_kPa": ("kPa", "principal Cauchy stresses, largest first; 0 where inverted"),
     "green_lagrange_strain": ("1", "Green-Lagrange strain E = (F^T F - I) / 2 (9 components)"),
     "det_F": ("1", "volume ratio J = det F"),
+    "inverted": (
+        "1",
+        "1 where the solver's state has no stress in the cell (det F <= 0 or a non-finite "
+        "value): its stresses are written as 0",
+    ),
     "cell_tag": ("1", "1 dermis, 2 subcutis"),
+}
+# The arrays that need the stress tensor (left out when a stage has none, `tensor_source`).
+TENSOR_FIELDS = (
+    "cauchy_stress_kPa",
+    "principal_stress_kPa",
+    "green_lagrange_strain",
+    "det_F",
+    "normal_traction_kPa",
+    "contact_pressure_kPa",
+)
+# How a stage's tensor arrays were computed (job-<index>.json, "stages"), by `tensor_source`.
+TENSOR_SOURCES = {
+    "displacement": (
+        "from the stored displacement per tetrahedron (F = I + grad u, which on a P1 run is "
+        "the solver's own, constant per cell) and the strain energy of physics.materials: the "
+        "von Mises of cauchy_stress_kPa equals the stored von_mises_kPa to float32 rounding"
+    ),
+    "solver": (
+        "the solver's cell means of its samples, read from the fields file as they are (the "
+        "von Mises of a P2 cell's mean tensor is at most the mean of its samples' von Mises)"
+    ),
+    "none": (
+        "not exported: the store keeps a P2 field's vertex values only, and their linear "
+        "interpolant is not the solver's state (its stresses contradict von_mises_kPa and it "
+        "can be inverted where the solver's field is not)"
+    ),
 }
 SURFACE_FIELDS: dict[str, tuple[str, str]] = {
     **VOLUME_FIELDS,
@@ -66,23 +122,57 @@ def _units(*tables: dict[str, tuple[str, str]]) -> dict[str, str]:
     return {k: u for t in tables for k, (u, _) in t.items()}
 
 
+def tensor_source(jf: JobFields, stage: int) -> str:
+    """How the stage's tensor arrays are computed, a key of `TENSOR_SOURCES`: ``solver``
+    where the fields file holds the solver's cell means, ``displacement`` on a P1 run (or
+    rows that name no element), ``none`` on a P2 run without them."""
+    if stage in jf.cell_data:
+        return "solver"
+    if jf.element_degree is None or jf.element_degree == 1:
+        return "displacement" if jf.materials is not None else "none"
+    return "none"
+
+
 def _mechanics(jf: JobFields, stage: int) -> CellMechanics:
-    if jf.materials is None:
-        raise ValueError("the job's materials are unknown")
+    assert jf.materials is not None  # tensor_source says "displacement" only with them
     return cell_mechanics(
         jf.points, jf.cells, jf.cell_tags, jf.fields[stage][0], jf.materials,
         str(jf.job["skin_type"]), float(jf.job["orientation_deg"]),
     )  # fmt: skip
 
 
-def _cell_fields(m: CellMechanics, vm: np.ndarray, tags: np.ndarray) -> dict[str, np.ndarray]:
+def _principal(sigma: np.ndarray) -> np.ndarray:
+    return np.ascontiguousarray(np.linalg.eigvalsh(sigma)[:, ::-1])
+
+
+def stage_cell_fields(jf: JobFields, stage: int) -> dict[str, np.ndarray]:
+    """The stage's cell arrays (`VOLUME_FIELDS`, the tensor ones as `tensor_source` says),
+    every value finite: a cell without stress is ``inverted`` = 1 with its stresses 0."""
+    vm = np.asarray(jf.fields[stage][1], np.float32)
+    bad = ~np.isfinite(vm)
+    source = tensor_source(jf, stage)
+    tensors: dict[str, np.ndarray] = {}
+    if source == "displacement":
+        m = _mechanics(jf, stage)
+        sigma, E, J = m.cauchy_kPa, m.green_lagrange, m.det_F
+    elif source == "solver":
+        d = jf.cell_data[stage]
+        sigma = d["cauchy_stress_kPa"].reshape(-1, 3, 3)
+        E, J = d["green_lagrange_strain"].reshape(-1, 3, 3), d["det_F"]
+    if source != "none":
+        bad |= ~np.isfinite(sigma).all(axis=(1, 2)) | ~(J > 0)
+        sigma = np.where(bad[:, None, None], 0.0, 0.5 * (sigma + sigma.transpose(0, 2, 1)))
+        tensors = {
+            "cauchy_stress_kPa": sigma,
+            "principal_stress_kPa": _principal(sigma),
+            "green_lagrange_strain": np.where(np.isfinite(E), E, 0.0),
+            "det_F": np.where(np.isfinite(J), J, 0.0),
+        }
     return {
-        "von_mises_kPa": np.asarray(vm, np.float32),
-        "cauchy_stress_kPa": m.cauchy_kPa.astype(np.float32),
-        "principal_stress_kPa": m.principal_kPa.astype(np.float32),
-        "green_lagrange_strain": m.green_lagrange.astype(np.float32),
-        "det_F": m.det_F.astype(np.float32),
-        "cell_tag": np.asarray(tags, np.int32),
+        "von_mises_kPa": np.where(bad, np.float32(0), vm),
+        **tensors,
+        "inverted": bad.astype(np.int32),
+        "cell_tag": np.asarray(jf.cell_tags, np.int32),
     }
 
 
@@ -100,19 +190,20 @@ def _surface_fields(
     jf: JobFields, owner: np.ndarray, cell: dict[str, np.ndarray], u: np.ndarray
 ) -> dict[str, np.ndarray]:
     out = {k: v[owner] for k, v in cell.items()}
-    n = _normals(jf, owner, u)
-    snn = np.einsum("ti,tij,tj->t", n, cell["cauchy_stress_kPa"][owner].astype(float), n)
-    flank = np.isin(jf.facet_tags, WOUND_TAGS)
     out["facet_tag"] = jf.facet_tags.astype(np.int32)
     out["closure_zone"] = jf.zone.astype(np.int32)
-    out["normal_traction_kPa"] = snn.astype(np.float32)
-    out["contact_pressure_kPa"] = np.where(flank, np.maximum(-snn, 0.0), 0.0).astype(np.float32)
+    if "cauchy_stress_kPa" in cell:
+        n = _normals(jf, owner, u)
+        snn = np.einsum("ti,tij,tj->t", n, cell["cauchy_stress_kPa"][owner].astype(float), n)
+        flank = np.isin(jf.facet_tags, WOUND_TAGS)
+        out["normal_traction_kPa"] = snn
+        out["contact_pressure_kPa"] = np.where(flank, np.maximum(-snn, 0.0), 0.0)
     return out
 
 
 def _write_stage(jf: JobFields, d: Path, name: str, k: int, surf: ExteriorSurface) -> str:
-    u, vm = jf.fields[k]
-    cell = _cell_fields(_mechanics(jf, k), vm, jf.cell_tags)
+    u = jf.fields[k][0]
+    cell = stage_cell_fields(jf, k)
     vol, srf = f"{name}_stage{k}_volume.vtu", f"{name}_stage{k}_surface.vtu"
     u32 = np.asarray(u, np.float32)
     write_vtu(
@@ -133,12 +224,23 @@ def _write_stage(jf: JobFields, d: Path, name: str, k: int, surf: ExteriorSurfac
 def _write_xdmf(jf: JobFields, d: Path, name: str) -> str:
     import meshio
 
+    class _Writer(meshio.xdmf.TimeSeriesWriter):
+        """meshio's writer with its HDF5 file beside the XDMF file (meshio's own opens
+        ``<stem>.h5`` in the working directory); the XDMF names it relative to itself."""
+
+        def __enter__(self) -> _Writer:
+            import h5py
+
+            self.h5_filename = str(self.filename.with_suffix(".h5"))
+            self.h5_file = h5py.File(self.h5_filename, "w")
+            return self
+
     path = d / f"{name}.xdmf"
-    with meshio.xdmf.TimeSeriesWriter(path) as w:
+    with _Writer(path) as w:
         w.write_points_cells(jf.points, [("tetra", jf.cells)])
         for k in sorted(jf.fields):
-            u, vm = jf.fields[k]
-            cell = _cell_fields(_mechanics(jf, k), vm, jf.cell_tags)
+            u = jf.fields[k][0]
+            cell = stage_cell_fields(jf, k)
             w.write_data(
                 k,
                 point_data={"displacement_mm": np.asarray(u, np.float64)},
@@ -148,6 +250,31 @@ def _write_xdmf(jf: JobFields, d: Path, name: str) -> str:
                 },
             )
     return path.name
+
+
+def _stage_numbers(jf: JobFields, stage: int) -> dict[str, Any]:
+    """A stored stage's tensor source, inverted cells and its stress numbers, each named for
+    what it is (`html.STRESS_LABELS`)."""
+    if stage not in jf.fields:
+        return {}
+    cell = stage_cell_fields(jf, stage)
+    row = next((r for r in jf.rows if int(r["stage"]) == stage), {})
+    numbers = {key: _finite(row.get(key)) for key in STRESS_LABELS if key in row}
+    numbers[CELL_MEAN_MAX] = float(cell["von_mises_kPa"].max())
+    return {
+        "tensor_source": tensor_source(jf, stage),
+        "inverted_cells": int(cell["inverted"].sum()),
+        "min_J": _finite(row.get("min_J")),
+        "stress_kPa": numbers,
+    }
+
+
+def _finite(v: Any) -> float | None:
+    try:
+        f = float(v)
+    except (TypeError, ValueError):
+        return None
+    return f if np.isfinite(f) else None
 
 
 def export_job(jf: JobFields, out_dir: str | Path, xdmf: bool = False) -> dict[str, Any]:
@@ -177,8 +304,11 @@ def export_job(jf: JobFields, out_dir: str | Path, xdmf: bool = False) -> dict[s
         "cell_data": {k: {"unit": u, "meaning": m} for k, (u, m) in SURFACE_FIELDS.items()},
         "cell_tags": dict(CELL_TAGS),
         "facet_tags": dict(FACET_TAGS),
-        "derived_from": "the stored vertex displacement, cell by cell (F = I + grad u)",
+        "element_degree": jf.element_degree,
+        "tensor_sources": dict(TENSOR_SOURCES),
+        "stress_numbers": dict(STRESS_LABELS),
         "xdmf": _write_xdmf(jf, d, name) if xdmf and jf.fields else None,
+        "xdmf_data": f"{name}.h5" if xdmf and jf.fields else None,
         "stages": [
             {
                 "stage": n.stage,
@@ -186,6 +316,7 @@ def export_job(jf: JobFields, out_dir: str | Path, xdmf: bool = False) -> dict[s
                 "status": n.status,
                 "file": files.get(n.stage),
                 "not_exported": n.reason or None,
+                **_stage_numbers(jf, n.stage),
             }
             for n in jf.notes
         ],

@@ -12,7 +12,9 @@ from importlib import resources
 from typing import Any
 
 __all__ = [
+    "CELL_MEAN_MAX",
     "JOB_COLUMNS",
+    "STRESS_LABELS",
     "STAGE_COLUMNS",
     "asset",
     "fmt",
@@ -22,6 +24,17 @@ __all__ = [
     "table",
 ]
 
+# The three von Mises numbers of a stage, each with one name wherever it is shown (the store's
+# names for the first two) and what it is.
+CELL_MEAN_MAX = "max_cell_mean_von_mises_kPa"
+STRESS_LABELS: dict[str, str] = {
+    "p99_von_mises_kPa": "p99 of the volume: the volume-weighted 99th percentile of the "
+    "solver's samples (the paper's maximal stress)",
+    "max_von_mises_kPa": "largest sample: the largest von Mises at one of the solver's sample "
+    "points (P2: 14 per cell)",
+    CELL_MEAN_MAX: "largest cell mean: the largest of the stored cell means (what the 3D "
+    "view and the export colour)",
+}
 # The per-stage table of a job: (column, header); units are in the names.
 STAGE_COLUMNS: tuple[tuple[str, str], ...] = (
     ("stage", "stage"),
@@ -29,8 +42,8 @@ STAGE_COLUMNS: tuple[tuple[str, str], ...] = (
     ("status", "status"),
     ("field", "field"),
     ("newton_iterations", "Newton its"),
-    ("p99_von_mises_kPa", "p99_von_mises_kPa"),
-    ("max_von_mises_kPa", "max_von_mises_kPa"),
+    ("p99_von_mises_kPa", "p99_von_mises_kPa (p99 of the volume)"),
+    ("max_von_mises_kPa", "max_von_mises_kPa (largest sample)"),
     ("max_location_x_mm", "max_x_mm"),
     ("max_location_y_mm", "max_y_mm"),
     ("max_location_z_mm", "max_z_mm"),

@@ -30,12 +30,24 @@ from ..store.solverfile import (
     STAGE_DATASETS,
     stage_group,
 )
+from ..store.verified import (
+    check_solver_fingerprint,
+    current_solve_file,
+    read_fields_file,
+    verify_job_files,
+)
 from .surface import closure_zone_facets
 
 if TYPE_CHECKING:
     from ..mesh.cache import CachedMesh
 
+# Optional per stage: the solver's cell means of its stress samples (the Cauchy stress tensor
+# (m, 3, 3) kPa, the Green-Lagrange strain (m, 3, 3), J (m,)), which `viz.export` writes as
+# they are where a fields file holds them (a P2 field's vertex values cannot give them).
+SOLVER_CELL_DATASETS = ("cauchy_stress_kPa", "green_lagrange_strain", "det_F")
+
 __all__ = [
+    "SOLVER_CELL_DATASETS",
     "JobFields",
     "StageNote",
     "load_job",
@@ -75,6 +87,8 @@ class JobFields(NamedTuple):
     # stage -> `CLOSURE_LINE_DATASETS` name -> (k,): the line loads along the wound
     closure_lines: dict[int, dict[str, np.ndarray]] = {}
     source: str = ""  # the file the fields came from
+    # stage -> `SOLVER_CELL_DATASETS` name -> per-cell array, where the fields file holds them
+    cell_data: dict[int, dict[str, np.ndarray]] = {}
 
     @property
     def element_degree(self) -> int | None:
@@ -112,19 +126,7 @@ def stage_notes(rows: list[dict[str, Any]], stored: set[int]) -> list[StageNote]
 
 
 def _read_h5(path: Path) -> tuple[dict[str, Any], dict[str, dict[str, np.ndarray]]]:
-    import h5py
-
-    try:
-        with h5py.File(path, "r") as f:
-            attrs = {k: (v.decode() if isinstance(v, bytes) else v) for k, v in f.attrs.items()}
-            groups = {
-                g: {name: ds[()] for name, ds in f[g].items()}
-                for g in f
-                if isinstance(f[g], h5py.Group)
-            }
-    except (OSError, KeyError, ValueError) as err:
-        raise StoreError(f"{path}: unreadable fields file ({err})") from None
-    return attrs, groups
+    return read_fields_file(path)  # a regular file, bounded datasets, finite fields
 
 
 def _plain_names(job: JobRow, fields_file: str, mesh_file: str) -> None:
@@ -203,6 +205,7 @@ def load_job(
     fields_file = str(rows[0]["fields_file"] or "")
     mesh_file = str(rows[0]["mesh_file"] or "")
     _plain_names(job, fields_file, mesh_file)
+    verify_job_files(run.layout, rows[0])  # the checksums the result records, before reading
     groups: dict[str, Any] = {}
     stored: list[int] = []
     if fields_file:
@@ -236,7 +239,7 @@ def _assemble(
         if MESH_GROUP not in groups and cache is not None:
             cache.clear()  # jobs come grouped by geometry: one mesh at a time
             cache[key] = (points, cells, cell_tags, facets, facet_tags, in_zone)
-    fields, profiles, closure_lines = {}, {}, {}
+    fields, profiles, closure_lines, cell_data = {}, {}, {}, {}
     for k in stored:
         g = groups.get(stage_group(k), {})
         if not set(STAGE_DATASETS) <= set(g):
@@ -249,6 +252,10 @@ def _assemble(
             profiles[k] = _profiles(*(np.asarray(g[name]) for name in PROFILE_DATASETS))
         if set(CLOSURE_LINE_DATASETS) <= set(g):
             closure_lines[k] = {name: np.asarray(g[name], float) for name in CLOSURE_LINE_DATASETS}
+        if set(SOLVER_CELL_DATASETS) <= set(g):
+            cell_data[k] = {name: np.asarray(g[name], float) for name in SOLVER_CELL_DATASETS}
+            if any(len(a) != len(cells) for a in cell_data[k].values()):
+                raise StoreError(f"{source}: stage {k} cell arrays do not fit the mesh")
     return JobFields(
         job=job,
         rows=rows,
@@ -264,6 +271,7 @@ def _assemble(
         profiles=profiles,
         closure_lines=closure_lines,
         source=source,
+        cell_data=cell_data,
     )
 
 
@@ -285,6 +293,7 @@ def load_solver_file(run: Run, job: JobRow | None, path: str | Path) -> JobField
     if "stage_results" not in attrs or "job_id" not in attrs:
         raise StoreError(f"{path}: not a solver file of `woundsweep solve`")
     file_job = run.job(int(attrs.get("job_index", -1)))
+    check_solver_fingerprint(run, file_job, path, attrs)
     if file_job["job_id"] != attrs["job_id"]:
         raise StoreError(f"{path}: holds job {attrs['job_id']!r}, not one of {run.run_dir}")
     if job is not None and job["job_id"] != attrs["job_id"]:
@@ -325,7 +334,7 @@ def open_job(
         raise StoreError("give --job N or --result FILE.h5")
     assert job_index is not None  # job is None without it
     rows = read_results(run.run_dir, [str(job["job_id"])], run=run)
-    if len(rows) == 0 and solve_output(run.run_dir, job_index).is_file():
+    if len(rows) == 0 and current_solve_file(run, job_index) is not None:
         return load_solver_file(run, job, solve_output(run.run_dir, job_index))
     if len(rows) == 0:
         raise StoreError(

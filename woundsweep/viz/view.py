@@ -20,7 +20,17 @@ from ..config.manifest import JobRow
 from ..config.solver import element_name
 from ..config.sweep import MANIFEST_COLUMNS
 from ..core.schema import STAGE_NAMES
-from .html import JOB_COLUMNS, STAGE_COLUMNS, asset, json_script, page, plotly_js, table
+from .html import (
+    CELL_MEAN_MAX,
+    JOB_COLUMNS,
+    STAGE_COLUMNS,
+    STRESS_LABELS,
+    asset,
+    json_script,
+    page,
+    plotly_js,
+    table,
+)
 from .jobdata import JobFields, StageNote, records
 from .surface import max_cell_point, plane_slice, surface_of, zone_outline
 
@@ -77,6 +87,7 @@ def view_data(jf: JobFields) -> dict[str, Any]:
     cut_nodes, cut_edges = np.unique(np.r_[cut.edge_a, cut.edge_b], return_inverse=True)
     n_edges = len(cut.edge_a)
     p99 = {int(r["stage"]): _num(r.get("p99_von_mises_kPa")) for r in jf.rows}
+    largest_sample = {int(r["stage"]): _num(r.get("max_von_mises_kPa")) for r in jf.rows}
     stages = []
     for note in jf.notes:
         k = note.stage
@@ -87,6 +98,7 @@ def view_data(jf: JobFields) -> dict[str, Any]:
             "stored": note.stored,
             "reason": note.reason,
             "p99_von_mises_kPa": p99.get(k),
+            "max_von_mises_kPa": largest_sample.get(k),
         }
         if note.stored:
             u, vm = jf.fields[k]
@@ -100,6 +112,7 @@ def view_data(jf: JobFields) -> dict[str, Any]:
                 lines=_profile_lines(jf, k),
                 closure=_closure_lines(jf, k),
                 surface_max_kPa=float(np.nanmax(tri_vm)),
+                **{CELL_MEAN_MAX: float(vm[cell])},
                 max={
                     "value_kPa": float(vm[cell]),
                     "cell": cell,
@@ -187,14 +200,18 @@ def job_body(
             '<div class="side"><div id="lines"></div><div id="closure"></div></div></div>\n'
             '<p class="legend">Left: the deformed exterior surface (displacement times the '
             "deformation scale), each triangle coloured by the von Mises stress of the "
-            "tetrahedron it bounds; the colour scale ends at the stage's p99 and cells above "
-            "it are magenta (the colour bar's top band); the cut shows the half y &ge; the "
-            "wound's mid-section and the cut face; black outline: the closure zone; red "
-            "diamond: the cell of the largest von Mises (deformed midpoint). Right: von Mises "
+            "tetrahedron it bounds (its cell mean); the colour scale ends at the stage's p99 "
+            "of the volume and the cells above it are shaded from pale to deep magenta up to "
+            "the largest cell mean (the colour bar's top band); the cut shows the half y &ge; "
+            "the wound's mid-section and the cut face; black outline: the closure zone; red "
+            "diamond: the cell of the largest cell mean (deformed midpoint). Right: von Mises "
             "along the stored profile lines (reference configuration); below it the closing "
             "force per unit length along the wound (the load that holds the sutured zone shut: "
             "where the sutures work hardest) and the flanks' contact force per unit length. "
-            "Lengths in mm, stresses in kPa, line loads in mN/mm.</p>\n"
+            "Lengths in mm, stresses in kPa, line loads in mN/mm. The stage's three von Mises "
+            "numbers: "
+            + "; ".join(escape(text) for text in STRESS_LABELS.values())
+            + ".</p>\n"
             + json_script("wsdata", view_data(jf))
         )
     else:

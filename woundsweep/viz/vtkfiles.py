@@ -1,6 +1,9 @@
 """VTK XML files for ParaView: an unstructured grid (`write_vtu`, by meshio, binary and zlib)
-with the units of its arrays as a field-data string array, a multiblock (`vtm`) naming its
-blocks, and a time series (`pvd`). Every file is written atomically."""
+with the units of its arrays in an XML comment, a multiblock (`vtm`) naming its blocks, and a
+time series (`pvd`). Every file is written atomically.
+
+The units are a comment, not a field-data array: meshio (and so every script that reads a VTU
+through it) refuses VTK's String arrays, and every array's name carries its unit anyway."""
 
 from __future__ import annotations
 
@@ -12,18 +15,24 @@ import numpy as np
 
 from ..core.fsutil import atomic_write
 
-__all__ = ["UNITS_ARRAY", "pvd", "vtm", "write_text", "write_vtu"]
+__all__ = ["UNITS_COMMENT", "pvd", "units_of", "vtm", "write_text", "write_vtu"]
 
-# The field-data array of every VTU: one "name: unit" string per point or cell array.
-UNITS_ARRAY = "units"
+# The comment of every VTU that names each array's unit: "<!-- units: name=unit; ... -->".
+UNITS_COMMENT = "units:"
 
 
-def _string_array(name: str, values: Sequence[str]) -> str:
-    codes = " ".join(" ".join(str(b) for b in v.encode("utf-8")) + " 0" for v in values)
-    return (
-        f'<FieldData>\n<Array type="String" Name={quoteattr(name)} '
-        f'NumberOfTuples="{len(values)}" format="ascii">\n{codes}\n</Array>\n</FieldData>\n'
-    )
+def _units_comment(units: Sequence[tuple[str, str]]) -> str:
+    text = "; ".join(f"{n}={u}" for n, u in units).replace("--", "- -")
+    return f"<!-- {UNITS_COMMENT} {text} -->\n"
+
+
+def units_of(text: str) -> dict[str, str]:
+    """The units a VTU's comment names (``{}`` if it has none)."""
+    start = text.find(f"<!-- {UNITS_COMMENT} ")
+    if start < 0:
+        return {}
+    body = text[start + len(UNITS_COMMENT) + 6 : text.index(" -->", start)]
+    return dict(item.split("=", 1) for item in body.split("; ") if "=" in item)
 
 
 def _flat(a: np.ndarray) -> np.ndarray:
@@ -53,7 +62,7 @@ def write_vtu(
     missing = [n for n in names if n not in units]
     if missing:
         raise ValueError(f"no unit for {missing}")
-    block = _string_array(UNITS_ARRAY, [f"{n}: {units[n]}" for n in names])
+    block = _units_comment([(n, units[n]) for n in names])
 
     def write(tmp: str) -> None:
         meshio.write(tmp, mesh, file_format="vtu", binary=True, compression="zlib")

@@ -7,7 +7,9 @@
   var el = document.getElementById("wsdata");
   if (!el || typeof Plotly === "undefined") { return; }
   var D = JSON.parse(el.textContent);
-  var OVER = "#ff00ff";  // cells above the colour scale's top (p99)
+  // Cells above the colour scale's top (p99): pale to deep magenta up to the largest value,
+  // so the band still shows where the wound's centre is highest.
+  var OVER = ["#f7c6f5", "#ff00ff", "#8b008b"];
   var VIRIDIS = ["#440154", "#482878", "#3e4989", "#31688e", "#26828e", "#1f9e89",
                  "#35b779", "#6ece58", "#b5de2b", "#fde725"];
 
@@ -71,20 +73,23 @@
              line: { color: "black", width: 5 }, hoverinfo: "name" };
   }
 
-  // The colour scale: Viridis up to `top`, then a magenta band for the values above it.
+  // The colour scale: Viridis up to `top`, then a band of shades of magenta for the values
+  // above it, [top, max] mapped linearly onto [top, 1.15 top] (`shade`).
   function colours(top, max) {
     if (!(max > top)) {
       return { cmax: top, scale: VIRIDIS.map(function (c, i) { return [i / (VIRIDIS.length - 1), c]; }),
-               ticks: null };
+               ticks: null, shade: function (v) { return Math.min(v, top); } };
     }
     var cmax = top * 1.15, f = top / cmax, scale = [];
     VIRIDIS.forEach(function (c, i) { scale.push([f * i / (VIRIDIS.length - 1), c]); });
-    scale.push([f, OVER], [1, OVER]);
+    OVER.forEach(function (c, i) { scale.push([f + (1 - f) * i / (OVER.length - 1), c]); });
     var vals = [], text = [], step = niceStep(top / 5);
     for (var v = 0; v <= top * 0.93; v += step) { vals.push(v); text.push(String(+v.toPrecision(4))); }
-    vals.push(top, 0.5 * (top + cmax));
-    text.push("p99 " + top.toPrecision(3), "> p99 (max " + max.toPrecision(3) + ")");
-    return { cmax: cmax, scale: scale, ticks: [vals, text] };
+    vals.push(top, cmax);
+    text.push("p99 " + top.toPrecision(3), "max " + max.toPrecision(3));
+    return { cmax: cmax, scale: scale, ticks: [vals, text], shade: function (v) {
+      return v <= top ? v : top + (Math.min(v, max) - top) / (max - top) * (cmax - top);
+    } };
   }
 
   function niceStep(x) {
@@ -118,8 +123,8 @@
       }
     }
     var col = colours(top, s.surface_max_kPa);
-    var shown = V.map(function (v) { return Math.min(v, col.cmax); });
-    var bar = { title: { text: "von Mises (kPa)" } };
+    var shown = V.map(col.shade);
+    var bar = { title: { text: "von Mises, cell mean (kPa)" } };
     if (col.ticks) { bar.tickvals = col.ticks[0]; bar.ticktext = col.ticks[1]; }
     var surface = {
       type: "mesh3d", x: px, y: py, z: pz, i: I, j: J, k: K,
@@ -130,10 +135,10 @@
     };
     var mx = m.reference_mm.map(function (c, i) { return c + k * (m.deformed_mm[i] - c); });
     var marker = {
-      type: "scatter3d", mode: "markers+text", name: "max von Mises",
+      type: "scatter3d", mode: "markers", name: "largest cell mean",
       x: [mx[0]], y: [mx[1]], z: [mx[2]],
-      text: ["max " + m.value_kPa.toPrecision(4) + " kPa"], textposition: "top center",
-      marker: { symbol: "diamond", size: 7, color: "red" }, hoverinfo: "text"
+      text: ["largest cell mean " + m.value_kPa.toPrecision(4) + " kPa"],
+      marker: { symbol: "diamond", size: 5, color: "red" }, hoverinfo: "text"
     };
     var layout = {
       margin: { l: 0, r: 0, t: 30, b: 0 }, showlegend: true, legend: { x: 0, y: 1 },
@@ -146,8 +151,10 @@
     };
     var traces = [surface, marker];
     if (E.length) { traces.splice(1, 0, outline(p, cutBox.checked)); }
-    note.textContent = "max " + m.value_kPa.toPrecision(4) + " kPa at (" +
-      m.reference_mm.map(function (c) { return c.toFixed(3); }).join(", ") + ") mm (reference)";
+    note.textContent = "von Mises: largest cell mean " + m.value_kPa.toPrecision(4) + " kPa at (" +
+      m.reference_mm.map(function (c) { return c.toFixed(3); }).join(", ") + ") mm (reference)" +
+      (s.p99_von_mises_kPa ? "; p99 of the volume " + s.p99_von_mises_kPa.toPrecision(4) + " kPa" : "") +
+      (s.max_von_mises_kPa ? "; largest sample " + s.max_von_mises_kPa.toPrecision(4) + " kPa" : "");
     Plotly.react("plot", traces, layout, { responsive: true, displaylogo: false });
     drawLines(s, top);
   }
@@ -165,7 +172,7 @@
                font: { size: 14 } },
       xaxis: { title: { text: "distance along the line (mm)" } },
       yaxis: { title: { text: "von Mises (kPa)" }, rangemode: "tozero" },
-      legend: { orientation: "h", y: -0.2 },
+      legend: { x: 1.02, y: 1, xanchor: "left", yanchor: "top" },  // beside, not under
       shapes: top ? [{ type: "line", xref: "paper", x0: 0, x1: 1, y0: top, y1: top,
                        line: { color: "#999", dash: "dot", width: 1 } }] : []
     };
@@ -189,7 +196,7 @@
                font: { size: 14 } },
       xaxis: { title: { text: "y along the wound (mm)" } },
       yaxis: { title: { text: "mN/mm" }, rangemode: "tozero" },
-      legend: { orientation: "h", y: -0.25 }
+      legend: { x: 1.02, y: 1, xanchor: "left", yanchor: "top" }
     };
     Plotly.react("closure", traces, layout, { responsive: true, displayModeBar: false });
   }

@@ -52,14 +52,22 @@ def test_volume_weighted_p99() -> None:
 
 
 def test_nodal_p99_max_and_location() -> None:
-    # Two tets sharing face (1, 2, 3); nodal values: 0 -> 1, 4 -> 3, shared -> (1*1 + 3*3)/4.
+    # Two tets sharing face (1, 2, 3). The paper code's nodal values: each vertex takes the
+    # last cell's value (0 -> 1; the shared ones and 4 -> 3), unweighted.
     cells = np.array([[0, 1, 2, 3], [4, 1, 2, 3]])
     vm = np.array([1.0, 3.0])
     vol = np.array([1.0, 3.0])
     mid = np.array([[0.1, 0.2, 0.3], [0.4, 0.5, 0.6]])
     s = stress_summary(vm, vol, cells, mid)
-    nodal = np.array([1.0, 2.5, 2.5, 2.5, 3.0])
-    assert s["p99_von_mises_nodal_kPa"] == pytest.approx(np.percentile(nodal, 99))
+    assert s["p99_von_mises_nodal_kPa"] == pytest.approx(np.percentile([1, 3, 3, 3, 3], 99))
+    # Values at the vertices (a P2 cell's stress varies in it): the last cell's at each.
+    at_vertices = np.array([[1.0, 2.0, 3.0, 4.0], [9.0, 5.0, 6.0, 7.0]])
+    s = stress_summary(vm, vol, cells, mid, vertex_vm=at_vertices)
+    assert s["p99_von_mises_nodal_kPa"] == pytest.approx(np.percentile([1, 5, 6, 7, 9], 99))
+    # No wound: no wound-local p99; the cells within reach of one: theirs.
+    assert np.isnan(s["p99_von_mises_wound_kPa"])
+    near = stress_summary(vm, vol, cells, mid, near_wound=np.array([True, False]))
+    assert near["p99_von_mises_wound_kPa"] == 1.0
     assert s["max_von_mises_kPa"] == 3.0
     assert (s["max_location_x_mm"], s["max_location_y_mm"], s["max_location_z_mm"]) == (
         0.4,

@@ -148,12 +148,48 @@ def test_settings_defaults_are_table_2() -> None:
     assert load_sweep(PAPER).stages == s.stages
 
 
-@pytest.mark.parametrize("key", ["contact_model", "closure_load"])
-def test_a_stage_key_outside_the_schema_is_unknown(key: str) -> None:
+def test_a_stage_key_outside_the_schema_is_unknown() -> None:
     data = yaml.safe_load(Path(DEMO).read_text())
-    data["stages"] = {key: "smooth"}
+    data["stages"] = {"contact_model": "smooth"}
     with pytest.raises(SweepError) as err:
         parse_sweep(data)
     assert str(err.value).endswith(
-        f"stages.{key}: unknown key (expected one of ['closure_zone', 'contact_penalty_GPa'])"
+        "stages.contact_model: unknown key (expected one of "
+        "['closure_load', 'closure_zone', 'contact_penalty_GPa'])"
     )
+
+
+@pytest.mark.parametrize(
+    ("stages", "message"),
+    [
+        ({"closure_load": "smooth"}, "stages.closure_load: unknown closing load 'smooth'"),
+        ({"closure_load": 3}, "stages.closure_load: expected a name, got 3"),
+        ({"closure_zone": {"depth_per_w": -1}}, "closure_zone.depth_per_w: expected a positive"),
+        ({"closure_zone": {"y_fraction": 1.5}}, "closure_zone.y_fraction: expected a fraction"),
+    ],
+)
+def test_bad_stage_settings_are_named(stages: dict, message: str) -> None:
+    data = yaml.safe_load(Path(DEMO).read_text())
+    data["stages"] = stages
+    with pytest.raises(SweepError, match=message.replace("(", r"\(")):
+        parse_sweep(data)
+
+
+def test_paper_code_preset_is_the_paper_grid_with_the_code_closure() -> None:
+    """sweeps/paper-code.yaml differs from sweeps/paper.yaml in its stages only: the same jobs
+    (ids and parameters) with the published code's zone and closing load."""
+    from woundsweep.config.manifest import expand
+    from woundsweep.config.paper import ClosureZone, StageSettings
+
+    paper, code = load_sweep(PAPER), load_sweep(PAPER.parent / "paper-code.yaml")
+    assert code.stages == StageSettings.paper_code()
+    assert code.stages.closure_zone == ClosureZone(0.5, 0.5, 0.35)
+    assert (paper.grid, paper.shapes, paper.exclude) == (code.grid, code.shapes, code.exclude)
+    assert (paper.materials, paper.solver) == (code.materials, code.solver)
+    a, b = expand(paper), expand(code)
+    assert len(a) == len(b) == 11664
+    assert a["job_id"].tolist() == b["job_id"].tolist()
+    # The zone's depth follows the width: 0.35 w, capped at the wound's depth.
+    zone = code.stages.closure_zone
+    assert zone.depth_fraction_for(1.0, 0.7) == pytest.approx(0.5)
+    assert zone.depth_fraction_for(2.0, 0.5) == 1.0

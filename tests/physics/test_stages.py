@@ -63,24 +63,22 @@ def test_stage1_starts_from_the_unwounded_solution(box_model, skin: str) -> None
 
 
 @pytest.mark.parametrize("skin", SKIN_TYPES)
-def test_unwounded_oblique_orientation(box_model, skin: str) -> None:
-    """At 45 degrees the healthy-skin traction has shear (P_xy != 0). Stage 2 applies it and
-    gives the homogeneous state; stage 1's lateral faces are shear-free while its deep face is
-    held, so the patch cannot take that state: the two stages differ by a few percent."""
+def test_unwounded_oblique_orientation_is_healthy_skin(box_model, skin: str) -> None:
+    """At 45 degrees healthy skin carries an in-plane shear (P_xy != 0). Stage 1 prescribes
+    the healthy state's whole in-plane displacement on the lateral faces, so a patch without
+    a wound is homogeneous after it (to 1e-8), and stage 2's traction keeps it there."""
     from woundsweep.physics.materials import JobMaterials
     from woundsweep.physics.stages import run_stage
 
     m = box_model
     m.set_materials(JobMaterials.table2(skin, 45.0))
-    run_stage(m, 1)
+    assert abs(m.homogeneous[1].P[0, 1]) > 0.1 * abs(m.homogeneous[1].P[0, 0])
+    assert run_stage(m, 1).solve.status == "converged"
     u1 = m.displacement_input()
-    run_stage(m, 2)
-    u2 = m.displacement_input()
     hom = homogeneous_field(m.domain.points, skin, 45.0)
-    assert rel_l2(u2, hom) < 1e-6
-    diff = rel_l2(u2, u1)
-    print(f"\n{skin} 45 deg: stage 2 vs stage 1 relative L2 difference {diff:.3%}")
-    assert diff > 0.01
+    assert np.max(np.abs(u1 - hom)) <= 1e-8 * HALF
+    assert run_stage(m, 2).solve.status == "converged"
+    assert rel_l2(m.displacement_input(), hom) < 1e-6
 
 
 def test_lateral_facets_split_by_layer(box_model) -> None:
@@ -132,17 +130,8 @@ def test_rotating_the_orientation_by_90_degrees_rotates_the_solution(angle: floa
         vm_b = b.forms.von_mises_cells()[np.argsort(b.domain.cell_input)]
         np.testing.assert_allclose(vm_b, vm_a, rtol=1e-7, atol=1e-9 * vm_a.max())
         if stage == 1:
-            vm_stage1 = vm_a
             ua, ub = a.displacement_input(), b.displacement_input()
             np.testing.assert_allclose(ub, ua @ R.T, atol=1e-9)
-    # The field is not trivially invariant: at 45 degrees stage 1 is inhomogeneous, and the
-    # same (unrotated) patch at 135 degrees gives a different cellwise field.
-    if angle == 45.0:
-        c = WoundModel(box_patch(rotate=False), P1)
-        c.set_materials(JobMaterials.table2("stiff", 135.0))
-        run_stage(c, 1)
-        vm_c = c.forms.von_mises_cells()[np.argsort(c.domain.cell_input)]
-        assert np.max(np.abs(vm_c - vm_stage1)) > 0.01 * vm_stage1.max()
 
 
 def test_stage3_closing_load_reproduces_the_dirichlet_closure(cylinder_mesh) -> None:
@@ -232,16 +221,23 @@ def test_stiff_skin_has_higher_maximal_stress_than_soft() -> None:
     assert all(s > t for s, t in zip(p99["stiff"], p99["soft"]))
 
 
-def test_unconverged_stage_stops_later_stages(box_model) -> None:
+@pytest.fixture(scope="module")
+def wounded_model(cylinder_mesh):
+    """A wounded P1 model: stage 1's start (the unwounded state) is not its solution."""
+    from woundsweep.physics.model import WoundModel
+
+    return WoundModel(cylinder_mesh, P1)
+
+
+def test_unconverged_stage_stops_later_stages(wounded_model) -> None:
     from woundsweep.physics.job import run_stages
     from woundsweep.physics.materials import JobMaterials
     from woundsweep.solver import NewtonSettings
 
-    m = box_model
+    m = wounded_model
     saved = m.settings
     try:
         m.set_newton_settings(NewtonSettings(max_iterations=1, max_load_cuts=1))
-        # At 45 degrees stage 1's start (the homogeneous state) is not its solution.
         recs = run_stages(m, JobMaterials.table2("soft", 45.0), 3)
     finally:
         m.set_newton_settings(saved)
@@ -277,18 +273,18 @@ def test_newton_statuses_inverted_and_linear_solver_failed(box_model) -> None:
     assert res.status == "linear-solver-failed"
 
 
-def test_stage_iteration_budget_ends_a_long_continuation(box_model) -> None:
+def test_stage_iteration_budget_ends_a_long_continuation(wounded_model) -> None:
     """A stage that needs more Newton steps than ``max_stage_iterations`` in all its load
     increments stops as ``max-iterations`` before the end of its load."""
     from woundsweep.physics.materials import JobMaterials
     from woundsweep.physics.stages import run_stage
     from woundsweep.solver import NewtonSettings
 
-    m = box_model
+    m = wounded_model
     saved = m.settings
     try:
-        # Every increment solved to the full tolerance (path_rtol 0), and at 45 degrees, where
-        # stage 1's start is not its solution.
+        # Every increment solved to the full tolerance (path_rtol 0), on a wounded patch,
+        # where stage 1's start is not its solution.
         m.set_newton_settings(NewtonSettings(load_steps=4, max_stage_iterations=2, path_rtol=0.0))
         m.set_materials(JobMaterials.table2("soft", 45.0))
         out = run_stage(m, 1)

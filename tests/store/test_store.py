@@ -247,7 +247,14 @@ def test_diagnostic_columns_pinned() -> None:
     float64; no JSON column."""
     assert list(DIAGNOSTIC_FIELDS) == list(StageDiagnostics.__annotations__)
     ints = {k for k, t in DIAGNOSTIC_FIELDS.items() if t == pa.int64()}
-    assert ints == {"load_increments", "load_cuts", "contact_searches"}
+    assert ints == {
+        "load_increments",
+        "load_cuts",
+        "contact_searches",
+        "closing_amplitude_solves",
+        "contact_fade_points",
+        "audit_inside_nodes",
+    }
     assert all(t == pa.float64() for k, t in DIAGNOSTIC_FIELDS.items() if k not in ints)
     names = result_schema().names
     assert set(DIAGNOSTIC_FIELDS) <= set(names) and "stage_extra_json" not in names

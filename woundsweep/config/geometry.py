@@ -33,12 +33,23 @@ from .fusiform import FLOOR_RISE, Lens, lens
 from .paper import ClosureZone
 from .solver import DEGREES, SolverSettings
 
-__all__ = ["FINEST_FACTOR", "SHAPES", "GeometrySpec", "wound_distance_mm"]
+__all__ = [
+    "FINEST_FACTOR",
+    "LENGTH_RANGE_MM",
+    "MAX_SCALE_RATIO",
+    "SHAPES",
+    "GeometrySpec",
+    "wound_distance_mm",
+]
 
 SHAPES = ("cylindrical", "wedge", "fusiform")
 # The finest mesh size factor a mesh can have. A sweep's grid takes factors in (0, 1];
 # `woundsweep converge` refines up to this one, to extrapolate past the grid's finest.
 FINEST_FACTOR = 2.0
+# Every length of a geometry (mm), and how far apart its largest and smallest may be: the
+# shipped sweeps span 0.08-36 mm and ratios up to about 25, a clinical case about 500.
+LENGTH_RANGE_MM = (0.01, 1000.0)
+MAX_SCALE_RATIO = 2000.0
 
 
 @dataclass(frozen=True)
@@ -159,8 +170,8 @@ class GeometrySpec:
     ) -> GeometrySpec:
         """Build from a manifest row (pandas Series or dict with the manifest columns).
 
-        ``zone`` (an object with ``y_fraction`` and ``depth_fraction``, e.g. the sweep's
-        `ClosureZone`) sets the closure zone; None keeps the defaults. ``element_degree`` is
+        ``zone`` (the sweep's `ClosureZone`) sets the closure zone (its depth resolved for
+        this wound); None keeps the defaults. ``element_degree`` is
         the sweep's ``solver.element_degree``. Errors name the job (``job_index``) when the
         row has one.
         """
@@ -184,7 +195,13 @@ class GeometrySpec:
                 aspect,
                 _num(get("mesh_size_factor")),
                 float(ClosureZone.y_fraction if zone is None else zone.y_fraction),
-                float(ClosureZone.depth_fraction if zone is None else zone.depth_fraction),
+                float(
+                    ClosureZone.depth_fraction
+                    if zone is None
+                    else zone.depth_fraction_for(
+                        _num(get("wound_width_mm")), _num(get("wound_depth_mm"))
+                    )
+                ),
                 element_degree,
                 length,
             )
@@ -293,6 +310,7 @@ def _validate(spec: GeometrySpec) -> None:
         v = getattr(spec, name)
         if not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
             raise GeometryError(f"{name}={v!r} must be a positive length in mm")
+    _check_scale(spec)
     m = spec.mesh_size_factor
     if not isinstance(m, (int, float)) or not math.isfinite(m) or not 0 < m <= FINEST_FACTOR:
         raise GeometryError(
@@ -329,6 +347,32 @@ def _validate(spec: GeometrySpec) -> None:
         raise GeometryError(
             f"wound_depth_mm={spec.wound_depth_mm:g} reaches the bottom of the patch "
             f"(total thickness {T:g} mm)"
+        )
+
+
+_LENGTHS = (
+    "dermal_thickness_mm", "subcutis_thickness_mm", "patch_half_length_mm", "wound_width_mm",
+    "wound_depth_mm", "wound_length_mm",
+)  # fmt: skip
+
+
+def _check_scale(spec: GeometrySpec) -> None:
+    """Every length within `LENGTH_RANGE_MM`, and the largest at most `MAX_SCALE_RATIO` times
+    the smallest: gmsh does not finish a patch of kilometres or a wound a millionth of its
+    patch (the size law's cell count alone does not see either)."""
+    lo, hi = LENGTH_RANGE_MM
+    lengths = {
+        name: float(getattr(spec, name)) for name in _LENGTHS if getattr(spec, name) is not None
+    }
+    for name, v in lengths.items():
+        if not lo <= v <= hi:
+            raise GeometryError(f"{name}={v:g} must be within {lo:g}-{hi:g} mm")
+    small = min(lengths, key=lengths.__getitem__)
+    large = max(lengths, key=lengths.__getitem__)
+    if lengths[large] > MAX_SCALE_RATIO * lengths[small]:
+        raise GeometryError(
+            f"{large}={lengths[large]:g} is more than {MAX_SCALE_RATIO:g} times "
+            f"{small}={lengths[small]:g}: too far apart in scale to mesh"
         )
 
 

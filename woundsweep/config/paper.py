@@ -14,6 +14,7 @@ from types import MappingProxyType
 from typing import Any
 
 __all__ = [
+    "CLOSURE_LOADS",
     "ClosureZone",
     "FungParameters",
     "Materials",
@@ -109,29 +110,79 @@ class Materials:
 @dataclasses.dataclass(frozen=True)
 class ClosureZone:
     """Where primary intention acts: the middle ``y_fraction`` of the wound length (|y - y_c| <=
-    y_fraction * L_y, L_y the patch half-length) and the upper ``depth_fraction`` of its depth."""
+    y_fraction * L_y, L_y the patch half-length) and the upper ``depth_fraction`` of its depth.
+    ``depth_per_w``, when set, gives the depth as a multiple of the wound width w instead (the
+    published code's zone reaches 0.7 w / 2 below the surface), capped at the wound's depth.
+    """
 
     y_fraction: float = 1.0 / 3.0
     depth_fraction: float = 0.5
+    depth_per_w: float | None = None
+
+    def depth_fraction_for(self, width_mm: float, depth_mm: float) -> float:
+        """The zone's depth as a fraction of a wound's depth."""
+        if self.depth_per_w is None:
+            return self.depth_fraction
+        return min(1.0, self.depth_per_w * width_mm / depth_mm)
+
+    def to_dict(self) -> dict[str, Any]:
+        d: dict[str, Any] = {"y_fraction": self.y_fraction, "depth_fraction": self.depth_fraction}
+        if self.depth_per_w is not None:
+            d["depth_per_w"] = self.depth_per_w
+        return d
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> ClosureZone:
+        per_w = d.get("depth_per_w")
+        return cls(
+            float(d["y_fraction"]),
+            float(d["depth_fraction"]),
+            None if per_w is None else float(per_w),
+        )
+
+
+# The closing load of stages 3-6 (docs/model.md, "Closure load"):
+# - ``reactions``: the Dirichlet closure's nodal reactions of stage 2, held; the zone tied in
+#   the contact stages, which restart from stage 2;
+# - ``paper-code``: the published code's closure, a uniform x-traction of 1.82 max|P_xx| on
+#   the wound's upper part, no tie, stage 4 restarting from stage 1 (the reproduction preset);
+# - ``solved``: a uniform closing traction on the zone's dermal part whose amplitude is solved
+#   in stage 3 so that the zone's median surface gap is zero, held in stages 4-6 (no tie).
+CLOSURE_LOADS = ("reactions", "paper-code", "solved")
 
 
 @dataclasses.dataclass(frozen=True)
 class StageSettings:
-    """The sweep's ``stages``: the closure zone and the contact penalty k_V of stages 4, 5 and 6."""
+    """The sweep's ``stages``: the closure zone, the contact penalty k_V of stages 4, 5 and 6,
+    and the closing load of stages 3-6 (one of `CLOSURE_LOADS`)."""
 
     closure_zone: ClosureZone = ClosureZone()
     contact_penalty_GPa: tuple[float, float, float] = (1.0, 5.0, 100.0)
+    closure_load: str = "reactions"
+
+    def __post_init__(self) -> None:
+        if self.closure_load not in CLOSURE_LOADS:
+            raise ValueError(
+                f"closure_load {self.closure_load!r}: expected one of {', '.join(CLOSURE_LOADS)}"
+            )
+
+    @classmethod
+    def paper_code(cls) -> StageSettings:
+        """The published code's stages (reference-findings: its zone |y| < L/2 down to
+        0.7 w / 2, and its closure): the reproduction preset."""
+        return cls(ClosureZone(0.5, 0.5, 0.35), closure_load="paper-code")
 
     def to_dict(self) -> dict[str, Any]:
         return {
-            "closure_zone": dataclasses.asdict(self.closure_zone),
+            "closure_zone": self.closure_zone.to_dict(),
             "contact_penalty_GPa": list(self.contact_penalty_GPa),
+            "closure_load": self.closure_load,
         }
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> StageSettings:
-        zone = d["closure_zone"]
         return cls(
-            ClosureZone(float(zone["y_fraction"]), float(zone["depth_fraction"])),
+            ClosureZone.from_dict(d["closure_zone"]),
             tuple(float(k) for k in d["contact_penalty_GPa"]),  # type: ignore[arg-type]
+            str(d.get("closure_load", "reactions")),
         )

@@ -24,7 +24,7 @@ from ..core.fsutil import read_small_text
 from . import strictyaml
 from .analysis import ModelSettings
 from .limits import check_settings
-from .paper import Materials, StageSettings
+from .paper import CLOSURE_LOADS, Materials, StageSettings
 from .rules import compile_rule
 from .solver import DEGREES, SolverSettings
 
@@ -199,6 +199,9 @@ def _merge(path: str, key: str, default: Any, given: Any) -> Any:
                     base = template
                 out[name] = _merge(path, f"{key}.{name}", base, params)
             return out
+        if key.endswith("closure_zone") and "depth_per_w" in given:
+            # An optional key: the zone's depth as a multiple of the wound width.
+            default = {**default, "depth_per_w": 1.0}
         unknown = set(given) - set(default)
         if unknown:
             raise SweepError(
@@ -207,6 +210,10 @@ def _merge(path: str, key: str, default: Any, given: Any) -> Any:
                 f"unknown key (expected one of {sorted(default)})",
             )
         return {k: _merge(path, f"{key}.{k}", default[k], given.get(k)) for k in default}
+    if isinstance(default, str):
+        if not isinstance(given, str):
+            raise SweepError(path, key, f"expected a name, got {given!r}")
+        return given
     if isinstance(default, list):
         if not isinstance(given, list) or len(given) != len(default):
             raise SweepError(path, key, f"expected a list of {len(default)} numbers, got {given!r}")
@@ -322,9 +329,16 @@ def parse_sweep(data: Any, path: str = "<sweep>") -> Sweep:
         raise SweepError(
             path, "solver.element_degree", f"expected one of {DEGREES}, got {degree!r}"
         )
+    closure = settings["stages"]["closure_load"]
+    if closure not in CLOSURE_LOADS:
+        raise SweepError(
+            path,
+            "stages.closure_load",
+            f"unknown closing load {closure!r} (expected one of {', '.join(CLOSURE_LOADS)})",
+        )
     zone = settings["stages"]["closure_zone"]
     for k, v in zone.items():
-        if v > 1:
+        if k != "depth_per_w" and v > 1:
             raise SweepError(
                 path, f"stages.closure_zone.{k}", f"expected a fraction in (0, 1], got {v!r}"
             )

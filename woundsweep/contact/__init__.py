@@ -5,9 +5,11 @@ two-pass penalty on the flanks' smooth implicit surfaces (`woundsweep.contact.sm
 tangent's sparsity `CouplingPlan` plans (`woundsweep.contact.pattern`);
 `ContactMultipliers` carries its multipliers through Newton (the semi-smooth contact step,
 `woundsweep.contact.multipliers`); `ZoneTie` holds the closure zone's flanks together (the sutures)
-(`woundsweep.contact.tie`).
+(`woundsweep.contact.tie`); `audit_interpenetration` counts flank nodes inside the other side's
+deformed cells, independently of the contact (`woundsweep.contact.audit`).
 """
 
+from .audit import AuditResult, audit_interpenetration, audit_model
 from .geometry import orient_outward, owning_cells, split_wound_flanks
 from .multipliers import ContactMultipliers
 from .pattern import CouplingPlan
@@ -17,6 +19,7 @@ from .tie import ZoneTie
 
 __all__ = [
     "GPA_TO_KPA",
+    "AuditResult",
     "ContactModel",
     "ContactMultipliers",
     "ContactSummary",
@@ -24,6 +27,8 @@ __all__ = [
     "FlankContact",
     "Linearization",
     "ZoneTie",
+    "audit_interpenetration",
+    "audit_model",
     "orient_outward",
     "owning_cells",
     "split_wound_flanks",

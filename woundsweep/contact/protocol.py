@@ -22,6 +22,11 @@ class ContactSummary(NamedTuple):
     max_penetration_mm: float  # max -g (0 if none)
     max_penetration_rel: float  # max -g / h_s
     contact_force_mN: float  # total normal contact force, sum of c (-g)
+    # Engaged points (g <= 0) in the support's fade (0 < s < 1, past the master's rim) and
+    # their share of contact_force_mN (a ratio independent of k_V; 0 if no point penetrates).
+    # Defaults keep the four-field constructions valid.
+    n_fade_points: int = 0
+    fade_force_share: float = 0.0
 
 
 class Linearization(NamedTuple):

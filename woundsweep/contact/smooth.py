@@ -432,17 +432,31 @@ class FlankContact:
     def summary(self, u: np.ndarray) -> ContactSummary:
         """Penetration and compressive normal force of the state ``u`` at the current
         ``k_V_kPa``: force sum c s^2 (-g) over every contact point (s the support step),
-        penetration over the points the master's surface fully supports (s = 1)."""
+        penetration over the points the master's surface fully supports (s = 1); the engaged
+        points in the fade (0 < s < 1) and their share of the force. s is the one that
+        weights the energy (the held one after `freeze_support`)."""
         st = self._state(u, hessian=False)
         depth = np.maximum(-st.gap_all, 0.0)
         depth[~np.isfinite(depth)] = 0.0
-        force = float(self.k_V_kPa * np.sum(st.weight_all * depth))
+        point_force = st.weight_all * depth  # per point, without k_V: the share needs none
+        force = float(self.k_V_kPa * np.sum(point_force))
+        # weight_all = s^2 full_weight exactly, so these compare s with 0 and 1 exactly.
+        fade = (st.weight_all > 0.0) & (st.weight_all < st.full_weight)
+        fade &= st.gap_all <= 0.0
+        total = float(np.sum(point_force))
+        share = float(np.sum(point_force[fade])) / total if total > 0.0 else 0.0
+        n_fade = int(fade.sum())
         depth[st.weight_all < st.full_weight] = 0.0
         pen = depth > 0.0
         if not pen.any():
-            return ContactSummary(0, 0.0, 0.0, force)
+            return ContactSummary(0, 0.0, 0.0, force, n_fade, share)
         return ContactSummary(
-            int(pen.sum()), float(depth.max()), float(np.max(depth / st.size_all)), force
+            int(pen.sum()),
+            float(depth.max()),
+            float(np.max(depth / st.size_all)),
+            force,
+            n_fade,
+            share,
         )
 
     def reset_timers(self) -> None:

@@ -40,11 +40,17 @@ class StageDiagnostics(TypedDict, total=False):
     closure_force_right_mN: float | None
     lateral_force_mN: float | None
     closure_traction_kPa: float | None  # stage 3: mean closing load per deformed zone area
+    closing_traction_kPa: float | None  # stages 3-6 of the traction closures: the amplitude
+    closing_amplitude_solves: int | None  # stages 3-6 of the solved closure
     max_penetration_rel: float | None  # stages 4-6
     contact_penalty_kPa: float | None
     contact_detect_time_s: float | None
     contact_assembly_time_s: float | None
     contact_searches: int | None
+    contact_fade_points: int | None  # engaged points in the support's fade (0 < weight < 1)
+    contact_fade_force_share: float | None  # their share of the contact force
+    audit_inside_nodes: int | None  # stages 2-6: flank nodes inside the other side's tissue
+    audit_max_depth_mm: float | None  # the deepest such node's depth below the other flank
     tie_force_mN: float | None
     tie_max_slip_mm: float | None
     stability_min_eig_mN_per_mm: float | None  # a contact stage that did not converge

@@ -95,14 +95,16 @@ class MeshData(NamedTuple):
 
 
 STAGES = (1, 2, 3, 4, 5, 6)
-# Stage 4 restarts from stage 2's Dirichlet-closed state (docs/model.md, "The six stages"), so
-# a stage 3 that does not converge does not stop stages 4-6.
-_RESTARTS = MappingProxyType({4: 2})
+# Where stage 4 starts, per closing load (`woundsweep.config.paper.CLOSURE_LOADS`;
+# docs/model.md, "The six stages"): the reactions' from stage 2's Dirichlet-closed state and
+# the published code's from stage 1, so a stage 3 that does not converge does not stop
+# stages 4-6; the solved closure's from stage 3, whose amplitude it holds.
+_RESTARTS = MappingProxyType({"reactions": {4: 2}, "paper-code": {4: 1}, "solved": {}})
 
 
-def start_stage(stage: int) -> int:
+def start_stage(stage: int, closure_load: str = "reactions") -> int:
     """The stage whose converged state ``stage`` starts from (0 for stage 1)."""
-    return _RESTARTS.get(stage, stage - 1)
+    return _RESTARTS[closure_load].get(stage, stage - 1)
 
 
 STAGE_NAMES = MappingProxyType(
@@ -179,6 +181,7 @@ class StageResult(NamedTuple):
     time_s: float | None = None
     p99_von_mises_kPa: float | None = None
     p99_von_mises_nodal_kPa: float | None = None
+    p99_von_mises_wound_kPa: float | None = None
     max_von_mises_kPa: float | None = None
     max_location_x_mm: float | None = None
     max_location_y_mm: float | None = None

@@ -12,10 +12,10 @@ points to their vertex nodes.
 
 from __future__ import annotations
 
-import dataclasses
 from typing import Any
 
 import numpy as np
+import scipy.spatial
 
 from ..config.paper import ClosureZone
 from ..config.solver import DEGREES, SolverSettings
@@ -72,8 +72,12 @@ class WoundDomain:
         if degree not in DEGREES:
             raise ValueError(f"element degree {degree!r}: expected one of {DEGREES}")
         built = (getattr(mesh_data, "info", None) or {}).get("closure_zone")
-        if zone is not None and built is not None and built != dataclasses.asdict(zone):
-            raise ValueError(f"the mesh's closure zone {built} is not the sweep's {zone}")
+        # A zone whose depth scales with the wound width was resolved for this wound when
+        # the mesh was built: only its y extent is compared.
+        keys = ("y_fraction",) if zone is not None and zone.depth_per_w else built or ()
+        if zone is not None and built is not None:
+            if any(built[k] != getattr(zone, k) for k in keys):
+                raise ValueError(f"the mesh's closure zone {built} is not the sweep's {zone}")
         self.zone_spec = zone or (ClosureZone(**built) if built else ClosureZone())
         pts = np.asarray(mesh_data.points, dtype=float)
         cells = np.asarray(mesh_data.cells, dtype=np.int64)
@@ -249,6 +253,18 @@ class WoundDomain:
         return np.concatenate([dof_rows(self.bottom_nodes, 2), self.pin_rows()])
 
     # -- measures of a state ----------------------------------------------------------------
+
+    def near_wound_cells(self) -> np.ndarray | None:
+        """Cells (bool, mesh order) whose midpoint lies within one total thickness of the
+        wound's surface (reference configuration); None without a wound."""
+        if not self.has_wound:
+            return None
+        if not hasattr(self, "_near_wound"):
+            wound = np.unique(self.wound_facets())
+            thickness = float(self.z_top - self.bbox[0][2])
+            dist, _ = scipy.spatial.cKDTree(self.X[wound]).query(self.midpoints)
+            self._near_wound = dist <= thickness
+        return self._near_wound
 
     def deformed_zone_area(self, side: str, u: np.ndarray) -> float:
         """Deformed area (mm^2) of one flank's closure-zone triangles at the displacement

@@ -8,9 +8,13 @@ cell's volume):
 - ``p99_von_mises_kPa``, the "maximal stress": the volume-weighted 99th percentile, i.e. the
   smallest sample value v such that samples with von Mises <= v hold at least 99% of the
   reference volume (independent of how finely the mesh is graded);
-- ``p99_von_mises_nodal_kPa``: the unweighted 99th percentile (numpy's linear interpolation)
-  over nodal values, each the volume-weighted mean of the cell means around the node; this
-  is close to what the paper's code measured, for comparison only;
+- ``p99_von_mises_nodal_kPa``: the paper's estimator as its code computes it, the unweighted
+  99th percentile (numpy's linear interpolation) over the mesh's vertices of von Mises
+  interpolated into P1: each vertex takes the value of the last cell (mesh order) holding
+  it, evaluated at the vertex, as DOLFINx's interpolation assigns it; for comparison only;
+- ``p99_von_mises_wound_kPa``: the volume-weighted p99 over the samples of the cells within
+  one total thickness of the wound's surface: a wound-local measure that does not shrink as
+  the patch grows (the patch-wide p99 is diluted by healthy skin);
 - ``max_von_mises_kPa``, the largest sample, and its reference coordinates.
 
 The stored field and the profiles are cell means.
@@ -46,6 +50,7 @@ __all__ = [
     "NotConvergedError",
     "StageRecord",
     "job_model",
+    "code_nodal_p99",
     "run_stages",
     "solve_job",
     "stress_summary",
@@ -90,11 +95,24 @@ def _weighted_quantile(values: np.ndarray, weights: np.ndarray, q: float) -> flo
 
 _STRESS_KEYS = (
     "p99_von_mises_kPa",
+    "p99_von_mises_wound_kPa",
     "max_von_mises_kPa",
     "max_location_x_mm",
     "max_location_y_mm",
     "max_location_z_mm",
 )
+
+
+def code_nodal_p99(vertex_vm: np.ndarray, cell_vertices: np.ndarray) -> float:
+    """The paper code's p99: unweighted over vertices, each with the value of the last cell
+    holding it (``vertex_vm`` (cells, 4) at each cell's vertices, mesh order)."""
+    n_nodes = int(cell_vertices.max()) + 1
+    nodal = np.full(n_nodes, np.nan)
+    flat_nodes = np.asarray(cell_vertices).ravel()
+    # Fancy assignment keeps the last of repeated indices: the last cell in mesh order.
+    nodal[flat_nodes] = np.asarray(vertex_vm, dtype=float).ravel()
+    nodal = nodal[np.isfinite(nodal)]
+    return float(np.percentile(nodal, 99)) if len(nodal) else math.nan
 
 
 def stress_summary(
@@ -104,24 +122,24 @@ def stress_summary(
     midpoints: np.ndarray,
     samples: StressSamples | None = None,
     corners: np.ndarray | None = None,
+    vertex_vm: np.ndarray | None = None,
+    near_wound: np.ndarray | None = None,
 ) -> dict[str, float]:
-    """Volume-weighted and nodal p99, maximum and its location (see the module docstring).
+    """Volume-weighted, wound-local and nodal p99, maximum and its location (see the module
+    docstring).
 
     ``vm`` are cell means; ``samples`` (with the cells' vertex coordinates ``corners``,
     (cells, 4, 3)) replace them for p99 and the maximum. Without samples each cell is one
     sample at its midpoint. A sample with det F <= 0 (a P2 cell inverted inside) has no
-    stress and is left out; the stage's ``min_J`` reports it.
+    stress and is left out; the stage's ``min_J`` reports it. ``vertex_vm`` (cells, 4) are
+    the values at the cells' vertices (default: the cell means); ``near_wound`` (cells,) the
+    cells of the wound-local p99 (None: no wound, NaN).
     """
     vm = np.asarray(vm, dtype=float)
     volumes = np.asarray(volumes, dtype=float)
-    n_nodes = int(cell_nodes.max()) + 1
-    num = np.zeros(n_nodes)
-    den = np.zeros(n_nodes)
-    for col in range(cell_nodes.shape[1]):
-        np.add.at(num, cell_nodes[:, col], vm * volumes)
-        np.add.at(den, cell_nodes[:, col], volumes)
-    nodal = num[den > 0] / den[den > 0]
-    nodal_p99 = float(np.percentile(nodal, 99))
+    if vertex_vm is None:
+        vertex_vm = np.repeat(vm[:, None], cell_nodes.shape[1], axis=1)
+    nodal_p99 = code_nodal_p99(vertex_vm, cell_nodes)
     sampled = samples is not None and corners is not None
     if sampled:
         assert samples is not None  # sampled says so
@@ -141,9 +159,15 @@ def stress_summary(
         where = c[0] + (c[1:] - c[0]).T @ np.asarray(samples.points[j], dtype=float)
     else:
         where = np.asarray(midpoints[i], dtype=float)
+    wound_p99 = math.nan
+    if near_wound is not None:
+        local = valid & np.asarray(near_wound, dtype=bool)[:, None]
+        if local.any():
+            wound_p99 = _weighted_quantile(values[local], weights[local], 0.99)
     return {
         "p99_von_mises_kPa": _weighted_quantile(values[valid], weights[valid], 0.99),
         "p99_von_mises_nodal_kPa": nodal_p99,
+        "p99_von_mises_wound_kPa": wound_p99,
         "max_von_mises_kPa": float(values[i, j]),
         "max_location_x_mm": float(where[0]),
         "max_location_y_mm": float(where[1]),
@@ -169,7 +193,13 @@ def closure_columns(model: WoundModel, stage: int) -> tuple[dict[str, Any], Line
     cols: dict[str, Any] = {key: _finite(v) for key, v in m.columns().items()}
     if stage >= 2:
         cols["closed"] = int(m.closed)
-        cols["interpenetrating"] = int(m.interpenetrating)
+        # Mirrored zone points overlapping, or the audit's flank nodes inside the other side.
+        found = (
+            model.results[stage].diagnostics.get("audit_inside_nodes", 0)
+            if stage in model.results
+            else 0
+        )
+        cols["interpenetrating"] = int(m.interpenetrating or found > 0)
     closing = model.closing_forces if stage >= 2 else None
     return cols, line.line_loads(closing, model.contact_forces())
 
@@ -209,7 +239,7 @@ def run_stages(
     status: dict[int, str] = {0: StageStatus.CONVERGED}
     for k in range(1, last_stage + 1):
         ran = k == 1 or status[k - 1] != StageStatus.NOT_RUN
-        if not ran or status[start_stage(k)] != StageStatus.CONVERGED:
+        if not ran or status[start_stage(k, model.closure_load)] != StageStatus.CONVERGED:
             status[k] = StageStatus.NOT_RUN
             not_run = StageResult(k, StageStatus.NOT_RUN, element_degree=degree)
             records.append(StageRecord(not_run, {}, None, None))
@@ -223,7 +253,16 @@ def run_stages(
         if vm is not None:
             samples = model.forms.von_mises_samples()  # None on P1: the cells are the samples
             corners = None if samples is None else d.X[d.cell_vertices]
-            stats = stress_summary(vm, d.volumes, d.cell_vertices, d.midpoints, samples, corners)
+            stats = stress_summary(
+                vm,
+                d.volumes,
+                d.cell_vertices,
+                d.midpoints,
+                samples,
+                corners,
+                model.forms.von_mises_vertices() if samples is not None else None,
+                d.near_wound_cells(),
+            )
             if samples is not None and samples.det_F is not None:
                 min_J = min(min_J, float(samples.det_F.min()))
         closure, loads = closure_columns(model, k) if ok else ({}, None)

@@ -34,6 +34,7 @@ __all__ = [
     "SetUp",
     "Solve",
     "StepResult",
+    "combine",
     "run_load_step",
     "set_up",
     "settle_support",
@@ -179,6 +180,11 @@ def run_load_step(model: WoundModel, step: LoadStep) -> StepResult:
     return StepResult(res, run.end, reached)
 
 
+def combine(first: ContinuationResult, then: ContinuationResult) -> ContinuationResult:
+    """``then`` with the counts and times of ``first`` added: consecutive solves as one."""
+    return then._replace(**{f: getattr(first, f) + getattr(then, f) for f in _SUMMED})
+
+
 def settle_support(model: WoundModel, res: ContinuationResult, run: SetUp) -> ContinuationResult:
     """Newton holds each point's support step at the solve's start (`FlankContact.
     freeze_support`); a converged state is a result only if the support it reached is the
@@ -193,6 +199,6 @@ def settle_support(model: WoundModel, res: ContinuationResult, run: SetUp) -> Co
         again = continuation(
             model.newton, lambda s: run.load(1.0), run.force_scale, 1.0, run.policy
         )
-        res = again._replace(**{f: getattr(res, f) + getattr(again, f) for f in _SUMMED})
+        res = combine(res, again)
         rounds += 1
     return res

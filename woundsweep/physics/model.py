@@ -60,6 +60,11 @@ class WoundModel:
         # Without stage settings the closure zone is the one the mesh was built with.
         zone = None if stages is None else stages.closure_zone
         penalties = (stages or StageSettings()).contact_penalty_GPa
+        # The closing load of stages 3-6 (`woundsweep.physics.stages`); only the reactions'
+        # closure ties the zone in the contact stages.
+        self.closure_load = (stages or StageSettings()).closure_load
+        symmetric = tie_zone
+        tie_zone = tie_zone and self.closure_load == "reactions"
         if len(penalties) != 3:
             raise ValueError("contact_penalty_GPa needs three values (stages 4, 5, 6)")
         self.contact_penalty_kPa = tuple(float(k) * GPA_TO_KPA for k in penalties)
@@ -83,14 +88,15 @@ class WoundModel:
         self.problem = WoundProblem(d, self.forms, self.contact, self.tie)
         self.newton = NewtonSolver(self.problem, self.problem.A, solver.newton)
         # The sutured closure's stitches need not share the patch's symmetry.
-        self.use_symmetry = solver.symmetry and tie_zone and d.has_wound
+        self.use_symmetry = solver.symmetry and symmetric and d.has_wound
         self.materials: JobMaterials | None = None
         self.homogeneous: dict[int, HomogeneousState] = {}
         self.results: dict[int, StageOutcome] = {}
         self.displacements: dict[int, np.ndarray] = {}
-        # The closure's nodal reactions at the end of stage 2 (flat dofs, mN): the closing
-        # load of stages 3-6. None before stage 2.
+        # The closing load of stages 3-6 (flat dofs, mN) and its amplitude (kPa; None for the
+        # reactions, which have no single traction). None before stage 2.
         self.closing_forces: np.ndarray | None = None
+        self.closing_traction_kPa: float | None = None
 
     def attach_tie(self, tie: ZoneTie) -> None:
         """Hold the wound by ``tie`` (the sutures' footprints) instead of the closure zone's
@@ -148,6 +154,7 @@ class WoundModel:
         self.forms.set_loads(np.zeros((3, 3)), np.zeros((3, 3)))
         self.problem.closure_load = None
         self.closing_forces = None
+        self.closing_traction_kPa = None
         if self.contact is not None:
             self.contact.k_V_kPa = 0.0
         if self.tie is not None:
@@ -162,6 +169,12 @@ class WoundModel:
         forces = np.zeros_like(r)
         forces[rows] = r[rows]
         self.closing_forces = forces
+
+    def hold_closing_traction(self, shape: np.ndarray, amplitude_kPa: float) -> None:
+        """Keep ``amplitude_kPa`` times ``shape`` (the nodal forces of a unit traction, flat
+        dofs, mN per kPa) as the closing load of the stages after it."""
+        self.closing_forces = amplitude_kPa * shape
+        self.closing_traction_kPa = float(amplitude_kPa)
 
     def record(self, outcome: StageOutcome) -> None:
         """Keep a stage's outcome and its end state (a later stage may start from it)."""

@@ -98,6 +98,7 @@ def run_analysis(
     keep_reopened: bool = False,
     keep_duplicates: bool = False,
     stress: str = STRESS,
+    beside: Sequence[str | Path] = (),
 ) -> AnalysisOutput:
     """Fit and evaluate each scheme; write metrics, models, figures and report.md.
 
@@ -105,6 +106,8 @@ def run_analysis(
     ``echo`` receives a line before each long step (training takes minutes on 70k rows).
     ``stress`` is the store's column the models learn (a von Mises statistic in kPa); the
     steps below read it under `STRESS`, and metrics.json and the model files name it.
+    ``beside`` are runs closed by other closing loads, drawn beside this one's in Figure 2
+    (`woundsweep.analysis.closures`).
     """
     say = echo or (lambda _line: None)
     import xgboost as xgb
@@ -125,6 +128,14 @@ def run_analysis(
     settings = resolve_settings(sweep_analysis, overrides)
     q = settings.quantiles
     results, orphans = drop_orphans(load_results(rd, run), run)
+    compared = []
+    if beside:  # checked before any training: the runs' closing loads must differ
+        from .closures import closure_rows, closure_summary
+
+        compared = [closure_rows(rd)] + [closure_rows(other) for other in beside]
+        loads = [c[1] for c in compared]
+        if len(set(loads)) != len(loads):
+            raise AnalysisError(f"--beside: each run needs its own closing load, got {loads}")
     degree = rows_element_degree(results)
     record = trained_on(run, results)
     column = stress
@@ -153,6 +164,12 @@ def run_analysis(
     svs, pairs = stiff_vs_soft(rows)
     locs = normalised_locations(rows)
     pos = profile_positions(rows)
+    closures = None
+    if compared:
+        import pandas as pd
+
+        closures = closure_summary(compared)
+        pos = profile_positions(pd.concat([c[0] for c in compared], ignore_index=True))
     target = rows[STRESS].to_numpy(dtype=np.float64)
     metrics: dict[str, Any] = {
         "woundsweep_version": __version__,
@@ -181,6 +198,8 @@ def run_analysis(
         "max_location": location_summary(locs),
         "max_location_profiles": profile_summary(pos),
     }
+    if closures is not None:
+        metrics["closures"] = closures
     metrics["mesh_sensitivity"] = mesh_sensitivity(rows, metrics)
     final = Path(out_dir) if out_dir is not None else RunLayout(rd).analysis_dir
     out = _staging_dir(final)

@@ -7,6 +7,7 @@ from pathlib import Path
 from typing import Any
 
 from ..core.fsutil import atomic_write_bytes
+from .closures import report_lines as closure_report_lines
 from .mesh_sensitivity import report_lines as mesh_report_lines
 from .profile_locations import report_lines as profile_report_lines
 
@@ -230,6 +231,7 @@ def render_report(metrics: dict[str, Any], figures: Sequence[str]) -> str:
     lines += surrogate_lines(metrics)
     if "max_location_profiles" in metrics:
         lines += profile_report_lines(metrics)
+    lines += closure_report_lines(metrics)
     if "mesh_sensitivity" in metrics:
         lines += mesh_report_lines(metrics["mesh_sensitivity"])
     lines += [

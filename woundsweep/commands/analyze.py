@@ -103,6 +103,12 @@ def summary_lines(metrics: dict[str, Any]) -> list[str]:
     "--stress", "stress", default="p99_von_mises_kPa", show_default=True, metavar="COLUMN",
     help="The store's von Mises column (kPa) the models learn.",
 )  # fmt: skip
+@click.option(
+    "--beside", "beside", multiple=True, metavar="RUN_DIR",
+    type=click.Path(exists=True, file_okay=False, path_type=Path),
+    help="A run of the same jobs closed by another stages.closure_load: its Figure 2 is drawn "
+    "beside this run's, and the report compares them (repeatable).",
+)  # fmt: skip
 def cmd(
     run_dir: Path,
     quantiles: int | None,
@@ -114,6 +120,7 @@ def cmd(
     keep_reopened: bool,
     keep_duplicates: bool,
     stress: str,
+    beside: tuple[Path, ...],
 ) -> None:
     """Fit the stress-quantile model (XGBoost) and write RUN_DIR/analysis/.
 
@@ -156,6 +163,7 @@ def cmd(
             keep_reopened=keep_reopened,
             keep_duplicates=keep_duplicates,
             stress=stress,
+            beside=beside,
         )
         bar.update(bar.total - bar.n)
     except BaseException:

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import numpy as np
 import pandas as pd
-import pytest
 from synthetic_store import SMALL_SWEEP, write_store
 
 from woundsweep.analysis.closures import closure_summary, report_lines

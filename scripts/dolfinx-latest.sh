@@ -48,7 +48,7 @@ APT_OPTS=(-o Acquire::Check-Valid-Until=false -o APT::Install-Recommends=false -
 # python3-pyarrow nor python3-xgboost.
 PACKAGES=(python3-dolfinx-real python3-numpy python3-pandas
           python3-h5py python3-yaml python3-click python3-tqdm python3-matplotlib python3-sklearn
-          python3-scipy python3-pytest python3-pytest-timeout
+          python3-scipy python3-pytest python3-pytest-timeout python3-pytest-xdist
           libopenblas0-serial ca-certificates python3-pip
           libgl1 libglu1-mesa libxcursor1 libxinerama1 libxft2 libxrender1)
 OPTIONAL_PACKAGES=(python3-pyarrow python3-xgboost)
@@ -200,12 +200,13 @@ STAGES_PY=$1; shift
 python3 -c 'import dolfinx, sys, numpy; print(f"dolfinx-latest: DOLFINx {dolfinx.__version__}, Python {sys.version.split()[0]}, numpy {numpy.__version__}")'
 t0=$(date +%s)
 rc=0
-# -p no:cacheprovider: /src is read-only. Every fem test (the rest runs on the host already)
+# -p no:cacheprovider: /src is read-only; -n auto: one pytest-xdist worker per core, whole
+# files per worker (as `make test`). Every fem test (the rest runs on the host already)
 # except the SLURM ones, which need slurmctld/slurmd on the host (the root has no cluster) and
 # test the scheduling around `woundsweep solve`, not DOLFINx; they run on the host's DOLFINx.
 markers=${DOLFINX_LATEST_MARKERS:-fem}
 echo "dolfinx-latest: pytest -m '$markers' --ignore=tests/execution/test_slurm.py --ignore=tests/execution/test_slurm_cluster.py $*"
-python3 -m pytest -m "$markers" --ignore=tests/execution/test_slurm.py --ignore=tests/execution/test_slurm_cluster.py -p no:cacheprovider -q -rfE "$@" \
+python3 -m pytest -m "$markers" --ignore=tests/execution/test_slurm.py --ignore=tests/execution/test_slurm_cluster.py -p no:cacheprovider -q -rfE -n auto --dist loadfile "$@" \
     || rc=$?
 [[ $rc -eq 5 ]] && { echo "dolfinx-latest: no fem tests collected"; rc=0; }
 echo "dolfinx-latest: fem tests: $(($(date +%s) - t0)) s, status $rc"

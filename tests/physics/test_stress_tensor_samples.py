@@ -45,3 +45,37 @@ def test_sample_tensors_give_the_solvers_von_mises() -> None:
     # A cell inverted at every sample has no mean: NaN, which the export marks.
     bad = t._replace(F=np.where(np.arange(len(t.F))[:, None, None, None] == 0, -t.F, t.F))
     assert np.isnan(cell_means(bad)["cauchy_stress_kPa"][0]).all()
+
+
+def test_a_p2_stage_stores_the_solvers_tensors_with_its_field(tmp_path) -> None:
+    """A converged P2 stage keeps the solver's cell means in input cell order beside its
+    von Mises field, and the solver file holds them: finite, symmetric, J > 0, and the von
+    Mises of each cell's mean tensor at most its stored cell mean (von Mises is convex)."""
+    import h5py
+
+    from woundsweep.physics.job import run_stages, write_output
+    from woundsweep.physics.materials import JobMaterials
+    from woundsweep.physics.model import WoundModel
+
+    mesh = box_patch()
+    m = WoundModel(mesh, SolverSettings(element_degree=2))
+    recs = run_stages(m, JobMaterials.table2("stiff", 45.0), 2)
+    assert all(r.cell_tensors is not None for r in recs)
+    out = tmp_path / "job.h5"
+    write_output(out, {"job_id": "x", "job_index": 0}, mesh, recs)
+    with h5py.File(out, "r") as f:
+        g = f["stage_2"]
+        sigma, J, vm = g["cauchy_stress_kPa"][()], g["det_F"][()], g["von_mises_kPa"][()]
+        E = g["green_lagrange_strain"][()]
+    n = len(mesh.cells)
+    assert sigma.shape == (n, 3, 3) and E.shape == (n, 3, 3) and J.shape == (n,)
+    assert np.isfinite(sigma).all() and (J > 0).all()
+    np.testing.assert_allclose(sigma, np.swapaxes(sigma, 1, 2), rtol=1e-5, atol=1e-4)
+    assert np.all(_vm(sigma.astype(float)) <= vm * (1 + 1e-5) + 1e-6)
+    # The healthy state at 45 degrees is homogeneous per layer: in input order, each layer's
+    # cells hold one tensor, with the in-plane shear of the oblique dermis.
+    tags = np.asarray(mesh.cell_tags)
+    for tag in np.unique(tags):
+        layer = sigma[tags == tag]
+        assert np.ptp(layer, axis=0).max() < 1e-4 * np.abs(layer).max()
+    assert np.abs(sigma[tags == tags.min()][:, 0, 1]).min() > 0.1

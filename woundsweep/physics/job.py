@@ -75,6 +75,10 @@ class StageRecord(NamedTuple):
     profiles_kPa: np.ndarray | None = None
     # Closing and contact forces per length along the wound, if converged (with a wound).
     line_loads: LineLoads | None = None
+    # P2, if converged: the solver's cell means of its stress samples in input cell order
+    # (`woundsweep.physics.forms.cell_means`: the Cauchy stress, the Green-Lagrange strain,
+    # J), stored with the stage's field so that exports show the solver's tensors.
+    cell_tensors: dict[str, np.ndarray] | None = None
 
 
 class JobOutcome(NamedTuple):
@@ -248,6 +252,7 @@ def run_stages(
         s = out.solve
         ok = s.status == StageStatus.CONVERGED
         vm = model.forms.von_mises_cells() if ok else None
+        tensors: dict[str, np.ndarray] | None = None
         stats: dict[str, float] = {}
         min_J = d.min_det(model.u)
         if vm is not None:
@@ -265,6 +270,13 @@ def run_stages(
             )
             if samples is not None and samples.det_F is not None:
                 min_J = min(min_J, float(samples.det_F.min()))
+            if samples is not None:
+                from .forms import cell_means
+
+                means = cell_means(model.forms.stress_tensor_samples())
+                tensors = {
+                    name: a[cell_input_order].astype(np.float32) for name, a in means.items()
+                }
         closure, loads = closure_columns(model, k) if ok else ({}, None)
         contact = {
             key: _finite(out.diagnostics[key])
@@ -307,6 +319,7 @@ def run_stages(
             vm[cell_input_order].astype(np.float32) if vm is not None else None,
             profiles,
             loads,
+            tensors,
         )
         records.append(rec)
         if echo is not None:
@@ -346,6 +359,8 @@ def write_output(
         if r.line_loads is not None:
             for name, data in zip(CLOSURE_LINE_DATASETS, r.line_loads):
                 profiles.setdefault(k, {})[name] = np.asarray(data, dtype=np.float32)
+        if r.cell_tensors is not None:
+            profiles.setdefault(k, {}).update(r.cell_tensors)
     attrs = {**attrs, "dolfinx_version": compat.DOLFINX_VERSION}
     write_solver_file(path, attrs, mesh, reports, fields, profiles)
 

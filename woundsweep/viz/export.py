@@ -57,8 +57,14 @@ __all__ = [
 VOLUME_FIELDS: dict[str, tuple[str, str]] = {
     "von_mises_kPa": (
         "kPa",
-        "von Mises stress, the cell mean of the solver's samples as stored (P1: the cell's "
-        "constant value; P2: the mean over the degree-4 rule's points); 0 where inverted",
+        "von Mises stress of cauchy_stress_kPa where it is exported (P2: of the cell's mean "
+        "tensor), else the cell mean of the solver's samples as stored (P1: the cell's "
+        "constant value); 0 where inverted",
+    ),
+    "von_mises_sample_mean_kPa": (
+        "kPa",
+        "P2 with the solver's tensors: the cell mean of the solver's von Mises samples as "
+        "stored (at least the von Mises of the mean tensor); 0 where inverted",
     ),
     "cauchy_stress_kPa": (
         "kPa",
@@ -91,8 +97,9 @@ TENSOR_SOURCES = {
         "von Mises of cauchy_stress_kPa equals the stored von_mises_kPa to float32 rounding"
     ),
     "solver": (
-        "the solver's cell means of its samples, read from the fields file as they are (the "
-        "von Mises of a P2 cell's mean tensor is at most the mean of its samples' von Mises)"
+        "the solver's cell means of its samples, read from the fields file as they are; "
+        "von_mises_kPa is the von Mises of that mean tensor (at most the mean of the samples' "
+        "von Mises, kept as von_mises_sample_mean_kPa)"
     ),
     "none": (
         "not exported: the store keeps a P2 field's vertex values only, and their linear "
@@ -168,8 +175,15 @@ def stage_cell_fields(jf: JobFields, stage: int) -> dict[str, np.ndarray]:
             "green_lagrange_strain": np.where(np.isfinite(E), E, 0.0),
             "det_F": np.where(np.isfinite(J), J, 0.0),
         }
+    extra: dict[str, np.ndarray] = {}
+    if source == "solver":
+        dev = tensors["cauchy_stress_kPa"] - np.trace(tensors["cauchy_stress_kPa"], axis1=1,
+                                                      axis2=2)[:, None, None] / 3 * np.eye(3)  # fmt: skip
+        extra["von_mises_sample_mean_kPa"] = np.where(bad, np.float32(0), vm)
+        vm = np.sqrt(1.5 * np.sum(dev * dev, axis=(1, 2))).astype(np.float32)
     return {
         "von_mises_kPa": np.where(bad, np.float32(0), vm),
+        **extra,
         **tensors,
         "inverted": bad.astype(np.int32),
         "cell_tag": np.asarray(jf.cell_tags, np.int32),

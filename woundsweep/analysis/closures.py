@@ -10,7 +10,7 @@ maximum lies within `ENDS_TOL` of the line's length of its closure zone's ends.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pandas as pd
@@ -21,22 +21,29 @@ from .data import drop_orphans, load_results, run_or_none
 from .paper import along_half_length
 from .settings import STAGE_GROUPS
 
-__all__ = ["ENDS_TOL", "closure_rows", "closure_summary", "report_lines"]
+if TYPE_CHECKING:
+    from ..config.manifest import Run
+
+__all__ = ["ENDS_TOL", "closure_entry", "closure_rows", "closure_summary", "report_lines"]
 
 ENDS_TOL = 0.05
 
 
+def closure_entry(results: pd.DataFrame, run: Run) -> tuple[pd.DataFrame, str, float]:
+    """A run's converged rows (of its ``results``, orphans dropped) with ``closure_load``
+    set, its closing load and its zone's y fraction."""
+    rows = results[results["status"] == StageStatus.CONVERGED.value]
+    load = run.sweep.stages.closure_load
+    return rows.assign(closure_load=load), load, run.sweep.stages.closure_zone.y_fraction
+
+
 def closure_rows(run_dir: str | Path) -> tuple[pd.DataFrame, str, float]:
-    """A run's converged rows with ``closure_load`` set, its closing load and its zone's
-    y fraction."""
+    """`closure_entry` of the run directory ``run_dir``."""
     rd = Path(run_dir)
     run = run_or_none(rd)
     if run is None:
         raise AnalysisError(f"--beside {rd}: not a run directory")
-    rows, _ = drop_orphans(load_results(rd, run), run)
-    rows = rows[rows["status"] == StageStatus.CONVERGED.value]
-    load = run.sweep.stages.closure_load
-    return rows.assign(closure_load=load), load, run.sweep.stages.closure_zone.y_fraction
+    return closure_entry(drop_orphans(load_results(rd, run), run)[0], run)
 
 
 def closure_summary(runs: list[tuple[pd.DataFrame, str, float]]) -> dict[str, Any]:

@@ -130,9 +130,11 @@ def run_analysis(
     results, orphans = drop_orphans(load_results(rd, run), run)
     compared = []
     if beside:  # checked before any training: the runs' closing loads must differ
-        from .closures import closure_rows, closure_summary
+        from .closures import closure_entry, closure_rows, closure_summary
 
-        compared = [closure_rows(rd)] + [closure_rows(other) for other in beside]
+        if run is None:
+            raise AnalysisError(f"--beside: {rd} has no sweep to say how it was closed")
+        compared = [closure_entry(results, run)] + [closure_rows(other) for other in beside]
         loads = [c[1] for c in compared]
         if len(set(loads)) != len(loads):
             raise AnalysisError(f"--beside: each run needs its own closing load, got {loads}")

@@ -189,7 +189,6 @@ def _amplitude_step(model: WoundModel, recipe: LoadStep) -> LoadStep:
         name=f"{recipe.name}-amplitude",
         start=None,
         closure_forces=model.closing_forces,
-        first_step=None,
     )
 
 

@@ -100,7 +100,7 @@ class FlatPatch(NamedTuple):
 
 
 @functools.cache
-def flat_patch(degree: int = 1, force_factor: float = 1.0) -> FlatPatch:
+def flat_patch(degree: int = 1) -> FlatPatch:
     """Solve the flat patch (module docstring)."""
     t0 = time.perf_counter()
     s = np.linspace(0.0, 1.0, N_BOX + 1)
@@ -117,9 +117,6 @@ def flat_patch(degree: int = 1, force_factor: float = 1.0) -> FlatPatch:
     walls = _walls(mesh, len(left.points), lambda c: np.abs(c[:, 0]) < 1e-9)
     dermis = dataclasses.replace(Fung.normal(0.0), a1=np.array([1.0, 0.0, 0.0]))
     b = _Bodies(mesh, walls, degree, JobMaterials(dermis, MooneyRivlin.subcutis(), 1.0))
-    if force_factor != 1.0:  # failure injection: a contact force off by a factor
-        b.contact = _Scaled(b.contact, force_factor)  # type: ignore[assignment]
-        b.problem.contact = b.contact
     X = b.domain.X
     held = Dirichlet(np.concatenate([
         b.rows(0, np.abs(X[:, 0] + 1.0) < 1e-9), b.rows(1, np.abs(X[:, 1]) < 1e-9),
@@ -159,29 +156,6 @@ def flat_patch(degree: int = 1, force_factor: float = 1.0) -> FlatPatch:
     drop = float(max(0.0, -np.diff(e).min()) / np.abs(e).max())
     return FlatPatch(force_err, overlap_err, slope, drop, energies, penalties,
                      time.perf_counter() - t0)  # fmt: skip
-
-
-class _Scaled:
-    """A contact whose forces and tangent are scaled by ``factor`` (failure injection only);
-    its summary and energy are the model's own."""
-
-    def __init__(self, inner: FlankContact, factor: float) -> None:
-        self._inner, self._factor = inner, factor
-
-    def __getattr__(self, name: str) -> Any:
-        return getattr(self._inner, name)
-
-    def __setattr__(self, name: str, value: Any) -> None:
-        if name in ("_inner", "_factor"):
-            object.__setattr__(self, name, value)
-        else:
-            setattr(self._inner, name, value)
-
-    def force_vector(self, u: np.ndarray) -> np.ndarray:
-        return self._factor * self._inner.force_vector(u)
-
-    def tangent_csr(self, u: np.ndarray) -> Any:
-        return self._factor * self._inner.tangent_csr(u)
 
 
 # -- the shrink fit -------------------------------------------------------------------------

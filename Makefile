@@ -7,7 +7,7 @@ WS      := $(VENV)/bin/woundsweep
 DEMO_DIR ?= runs/demo
 PYTEST_ARGS ?=
 
-.PHONY: setup test-deps test test-fast test-dolfinx-latest verify demo bench bench-convergence lint format clean
+.PHONY: setup test-deps test test-fast test-dolfinx-latest verify demo chart bench bench-convergence lint format clean
 
 setup:
 	@bash scripts/setup.sh
@@ -50,6 +50,15 @@ demo: setup
 	@echo "      analysis in $(DEMO_DIR)/analysis (report.md, metrics.json, figures)"
 	$(WS) atlas $(DEMO_DIR) --out $(DEMO_DIR)/atlas
 	@echo "demo: atlas index: $(abspath $(DEMO_DIR))/atlas/index.html (open it in a browser)"
+
+# The paper grid charted in parts (docs/atlas.md): continues from the kept table
+# charted/paper.parquet, runs the shards it lacks for CHART_HOURS, packs after each shard.
+CHART_SWEEP ?= sweeps/paper.yaml
+CHART_TABLE ?= charted/paper.parquet
+CHART_RUN ?= runs/chart-paper
+CHART_HOURS ?= 1
+chart: setup
+	$(PY) scripts/chart.py --sweep $(CHART_SWEEP) --table $(CHART_TABLE) --run $(CHART_RUN) --hours $(CHART_HOURS)
 
 bench: setup
 	@for b in benchmarks/bench_*.py; do echo "== $$b"; $(PY) $$b || exit 1; done

@@ -50,6 +50,14 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "woundsweep.commands.status",
         "Counts by failure class and stage, throughput, CPU time left.",
     ),
+    "pack": (
+        "woundsweep.commands.pack",
+        "Merge a run's finished results into one compact Parquet table (no fields).",
+    ),
+    "unpack": (
+        "woundsweep.commands.unpack",
+        "Write a packed table's jobs into a run's store; `run` then skips them.",
+    ),
     "analyze": (
         "woundsweep.commands.analyze",
         "Stress-quantile model (XGBoost), evaluation, figures, report.",

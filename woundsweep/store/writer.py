@@ -247,10 +247,15 @@ class Store(StoreTriage):
             "mesh_file": mesh_file,
             "mesh_sha256": common["mesh_file_sha256"],
             "fingerprint": common["result_fingerprint"],
-            "sha256": content_digest(table),
         }
+        return self.commit_rows(table, meta)
+
+    def commit_rows(self, table: pa.Table, meta: dict[str, Any]) -> Path:
+        """Write job ``meta["job_id"]``'s result rows with footer ``meta`` (its content
+        ``sha256`` is added here), atomically: the last step of storing a job."""
+        meta = {**meta, "sha256": content_digest(table)}
         table = table.replace_schema_metadata({META_KEY: json.dumps(meta).encode()})
-        path = self.result_path(job_id)
+        path = self.result_path(str(meta["job_id"]))
         atomic_write(path, lambda tmp: _write_parquet(table, tmp))
         return path
 

@@ -64,7 +64,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     ),
     "predict": (
         "woundsweep.commands.predict",
-        "Predicted stress quantile of one wound from an analyzed run.",
+        "Predicted stress of one wound (or a table of wounds, --table) from an analyzed run.",
     ),
     "slurm": (
         "woundsweep.commands.slurm",

@@ -34,6 +34,7 @@ __all__ = [
     "Prediction",
     "WoundPrediction",
     "angle_weights",
+    "check_level",
     "predict",
     "predict_wound",
 ]
@@ -243,6 +244,12 @@ def interpolation_flags(meta: dict[str, Any], params: Mapping[str, Any]) -> list
     return out
 
 
+def check_level(level: float) -> None:
+    """Refuse (`AnalysisError`) an interval level outside (0, 1)."""
+    if not 0.0 < float(level) < 1.0:
+        raise AnalysisError(f"interval level {level}: expected a value between 0 and 1")
+
+
 def predict(
     model: LoadedModel,
     params: Mapping[str, Any],
@@ -282,8 +289,7 @@ def predict_wound(
     orientation as the angle to the Langer line, and the flags say it so. An extrapolated
     answer has no interval (the calibration holds inside the training data only).
     """
-    if not 0.0 < float(level) < 1.0:
-        raise AnalysisError(f"interval level {level}: expected a value between 0 and 1")
+    check_level(level)
     meta = model.meta
     shape = _check_columns(meta, _check_factors(params))
     check_physical(params)

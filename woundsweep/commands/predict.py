@@ -3,12 +3,15 @@ estimate with its interval, the paper's stress quantile and the failure probabil
 
 The orientation is given either as ``--orientation`` (the stiff axis' angle to x, the sweep's
 ``orientation_deg``) or as ``--angle-to-langer`` (the wound's long axis against the Langer
-line, the stiff axis: ``orientation_deg = 90 - angle``)."""
+line, the stiff axis: ``orientation_deg = 90 - angle``).
+
+``--table FILE`` answers a table of wounds instead (`predict_table`): each row is read through
+the same options' types, `require_wound_options` and `parse_params` as one wound."""
 
 from __future__ import annotations
 
 import json
-from collections.abc import Callable
+from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -16,11 +19,20 @@ import click
 
 from ..analysis.prediction import MAX_PARAMETER
 from ..clitypes import FiniteFloat
+from ..core.errors import AnalysisError
 
 if TYPE_CHECKING:
     from ..analysis.model_io import LoadedModel
+    from ..analysis.prediction import WoundPrediction
 
-__all__ = ["cmd", "parse_params"]
+__all__ = [
+    "REQUIRED_WITHOUT_TABLE",
+    "DamagedModel",
+    "answer_wound",
+    "cmd",
+    "parse_params",
+    "require_wound_options",
+]
 
 
 # The Table 1 parameters given as numbers: option, manifest column, required, help.
@@ -62,12 +74,36 @@ _ANGLE_HELP = (
 )
 
 
+# Required for one wound, not given with --table (so not click's `required`: the command
+# checks them, `require_wound_options`), by parameter name.
+REQUIRED_WITHOUT_TABLE = frozenset(
+    {"shape", "skin_type", *(column for _, column, required, _ in _NUMERIC_PARAMS if required)}
+)
+_REQUIRED_NOTE = " [required without --table]"
+
+
 def _numeric_params(f: Callable[..., None]) -> Callable[..., None]:
     """One float option per `_NUMERIC_PARAMS` entry, in that order, named by its column."""
     for flag, column, required, text in reversed(_NUMERIC_PARAMS):
         kind = FiniteFloat(-MAX_PARAMETER, MAX_PARAMETER)  # float32 in the models: bounded
-        f = click.option(flag, column, type=kind, required=required, default=None, help=text)(f)
+        text += _REQUIRED_NOTE if required else ""
+        f = click.option(flag, column, type=kind, default=None, help=text)(f)
     return f
+
+
+def require_wound_options(ctx: click.Context, given: Iterable[str]) -> None:
+    """Refuse a wound without every required option (``given``: the parameter names given):
+    click's message for one, every one named in one line for more (as `cli.missing_required`)."""
+    have = set(given)
+    missing = [
+        p for p in ctx.command.get_params(ctx)
+        if p.name in REQUIRED_WITHOUT_TABLE and p.name not in have
+    ]  # fmt: skip
+    if len(missing) == 1:
+        raise click.MissingParameter(ctx=ctx, param=missing[0])
+    if missing:
+        names = ", ".join(max(p.opts, key=len) for p in missing)
+        raise click.UsageError(f"{ctx.info_name}: missing {names} (see --help)", ctx)
 
 
 def parse_params(
@@ -103,6 +139,32 @@ def _warn_if_stale(loaded: LoadedModel) -> None:
         note = stale_note(run_dir, loaded.meta.get("trained_on"))
         if note:
             click.echo(one_line(f"woundsweep: warning: {note}"), err=True)
+
+
+class DamagedModel(AnalysisError):
+    """Model files that `check_model` passed and prediction could not read."""
+
+
+def answer_wound(
+    model: Path,
+    loaded: LoadedModel,
+    params: dict[str, Any],
+    stages: Sequence[int] | None,
+    allow_extrapolation: bool,
+    level: float,
+    angle_to_langer: bool,
+) -> WoundPrediction:
+    """`predict_wound`, with a model file damaged past `check_model` reported in one line
+    (`DamagedModel`)."""
+    from ..analysis import predict_wound
+
+    try:
+        return predict_wound(
+            loaded, params, stages, allow_extrapolation, level, angle_to_langer=angle_to_langer
+        )
+    except (AttributeError, TypeError, KeyError, ValueError, IndexError) as err:
+        # check_model reads what it knows of; a model file damaged past it is still one line.
+        raise DamagedModel(f"{model}: damaged model files ({type(err).__name__})") from None
 
 
 def _span(k: int, q: int, lo: float, hi: float) -> str:
@@ -166,13 +228,12 @@ def _basis_lines(basis: dict[str, Any], q: int) -> list[str]:
 @click.argument("model", type=click.Path(path_type=Path))
 @click.option(
     "--shape",
-    required=True,
     type=click.Choice(["cylindrical", "wedge", "fusiform"]),
-    help="Wound shape.",
+    help="Wound shape." + _REQUIRED_NOTE,
 )
 @_numeric_params
 @click.option("--angle-to-langer", type=FiniteFloat(0, 90), default=None, help=_ANGLE_HELP)
-@click.option("--skin-type", required=True, help="Skin type name, e.g. soft, normal, stiff.")
+@click.option("--skin-type", help="Skin type name, e.g. soft, normal, stiff." + _REQUIRED_NOTE)
 @click.option(
     "--stage", "stages", type=click.IntRange(1, 6), multiple=True, help="Stage(s) [all trained]."
 )
@@ -186,19 +247,31 @@ def _basis_lines(basis: dict[str, Any], q: int) -> list[str]:
     "--allow-extrapolation", is_flag=True, help="Answer outside the training ranges, flagged."
 )
 @click.option("--json", "as_json", is_flag=True, help="Print JSON instead of a table.")
+@click.option(
+    "--table", type=click.Path(path_type=Path), default=None,
+    help="A .csv or .json file of wounds, one a row (columns: see below), in place of the "
+    "wound's options.",
+)  # fmt: skip
+@click.option(
+    "--out", type=click.Path(path_type=Path), default=None,
+    help="With --table: write the answers to this .csv or .json file [stdout].",
+)  # fmt: skip
 def cmd(
     model: Path,
-    shape: str,
-    skin_type: str,
+    shape: str | None,
+    skin_type: str | None,
     stages: tuple[int, ...],
     scheme: str | None,
     level: float,
     allow_extrapolation: bool,
     as_json: bool,
+    table: Path | None,
+    out: Path | None,
     angle_to_langer: float | None,
     **numeric: float | None,
 ) -> None:
-    """Predict one wound's maximal stress with the models from `woundsweep analyze`.
+    """Predict a wound's (or a table of wounds') maximal stress with the models from
+    `woundsweep analyze`.
 
     MODEL is a model_<split>.json file or a run directory. Prints, per stage, the stress
     surrogate's estimate (p99 von Mises, kPa) with its conformal interval at --level, the
@@ -213,27 +286,81 @@ def cmd(
     trees as they are and flagged as interpolated; values outside the trained ranges are
     refused unless --allow-extrapolation. Without --mesh-size-factor the answer is for the
     finest mesh trained on for the shape (stated).
-    """
-    from ..analysis import load_model, predict_wound
-    from ..analysis.model_io import check_model
-    from ..core.errors import AnalysisError
 
+    --table FILE answers a table of wounds instead, none of the wound's options given
+    (--level, --split, --stage and --allow-extrapolation apply to every row): a .csv file
+    (a header row of column names, then one wound a row; blank lines skipped) or a .json
+    file (a list of objects, one a wound). An empty cell, a JSON null or an absent key is an
+    option not given. The columns (the option's name with underscores is accepted too where
+    shown in brackets); the required options' columns and one of the orientation's must be
+    there, any other is refused:
+
+    \b
+      wound_shape (shape)                       --shape
+      dermal_thickness_mm (dermal_thickness)    --dermal-thickness
+      subcutis_thickness_factor                 --subcutis-thickness-factor
+      patch_size_factor                         --patch-size-factor
+      wound_width_factor                        --wound-width-factor
+      wound_depth_factor                        --wound-depth-factor
+      wound_aspect_factor                       --wound-aspect-factor
+      wound_length_factor                       --wound-length-factor
+      mesh_size_factor                          --mesh-size-factor
+      orientation_deg (orientation)             --orientation
+      angle_to_langer_deg (angle_to_langer)     --angle-to-langer
+      skin_type                                 --skin-type
+      stage                                     one stage, in place of --stage
+
+    Each row is checked as its options would be, and a refused row does not stop the
+    others. The answer has one row per wound and stage, CSV on stdout (with --json, a JSON
+    list of objects) or in --out FILE (.csv or .json by the suffix, written atomically):
+    row (the wound's 1-based place among the table's rows), the wound's parameters
+    (orientation_deg and angle_to_langer_deg both; mesh_size_factor the one answered for,
+    mesh_size_factor_default), stage, stress_kPa, interval_low_kPa, interval_high_kPa,
+    level, interval_note, quantile, stress_range_low_kPa, stress_range_high_kPa,
+    estimate_quantile, probability_class_1 ... probability_class_Q, failure_probability,
+    failure_note, orientation_weights (DEG:WEIGHT; ...), interpolated, extrapolated (flags
+    joined by "; ") and error: a refused row's refusal, worded as the one wound's (its
+    other answer columns empty, its cells as given). stderr ends with "N of M wounds
+    answered" (and the refused rows); the exit status is 0 if every row was answered, 3 if
+    a row was refused, 2 for a file that is no such table.
+    """
+    from ..analysis import load_model
+    from ..analysis.model_io import check_model
+
+    ctx = click.get_current_context()
+    wound = {"shape": shape, "skin_type": skin_type, "angle_to_langer": angle_to_langer}
+    given = [k for k, v in {**wound, **numeric}.items() if v is not None]
+    if table is not None:
+        from .predict_table import predict_table
+
+        conflict = [max(p.opts, key=len) for p in ctx.command.get_params(ctx) if p.name in given]
+        if conflict:
+            raise click.UsageError(
+                f"--table gives each wound's parameters: drop {', '.join(conflict)}"
+            )
+        if as_json and out is not None and out.suffix.lower() != ".json":
+            raise click.UsageError(f"--json and --out {out}: --out's suffix picks its format")
+        predict_table(
+            ctx, model, table, out, as_json, scheme, list(stages) or None, level,
+            allow_extrapolation,
+        )  # fmt: skip
+        return
+    if out is not None:
+        raise click.UsageError("--out needs --table (one wound's answer is printed)")
+    require_wound_options(ctx, given)
+    assert shape is not None and skin_type is not None  # require_wound_options
     params = parse_params(shape, skin_type, numeric, angle_to_langer)
     loaded = load_model(model, scheme)
     check_model(loaded)  # every field prediction reads, typed: a damaged file is one line
     q, scheme_name = int(loaded.meta["quantiles"]), str(loaded.meta["scheme"])
     _warn_if_stale(loaded)
-    try:
-        answer = predict_wound(
-            loaded, params, list(stages) or None, allow_extrapolation, level,
-            angle_to_langer=angle_to_langer is not None,
-        )  # fmt: skip
-    except (AttributeError, TypeError, KeyError, ValueError, IndexError) as err:
-        # check_model reads what it knows of; a model file damaged past it is still one line.
-        raise AnalysisError(f"{model}: damaged model files ({type(err).__name__})") from None
+    answer = answer_wound(
+        model, loaded, params, list(stages) or None, allow_extrapolation, level,
+        angle_to_langer is not None,
+    )  # fmt: skip
     preds = answer.stages
     if as_json:
-        out = {
+        doc = {
             "model": str(loaded.path),
             "scheme": scheme_name,
             "quantiles": q,
@@ -249,7 +376,7 @@ def cmd(
             "mesh_size_factor_default": answer.mesh_size_default,
             "basis": answer.basis,
         }
-        click.echo(json.dumps(out, indent=1))
+        click.echo(json.dumps(doc, indent=1))
         return
     click.echo(f"model: {loaded.path} ({scheme_name} split, {q} quantiles)")
     for line in _basis_lines(answer.basis, q):

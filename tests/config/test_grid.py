@@ -193,3 +193,37 @@ def test_paper_code_preset_is_the_paper_grid_with_the_code_closure() -> None:
     zone = code.stages.closure_zone
     assert zone.depth_fraction_for(1.0, 0.7) == pytest.approx(0.5)
     assert zone.depth_fraction_for(2.0, 0.5) == 1.0
+
+
+def test_between_sweeps_lie_between_the_paper_grid_values() -> None:
+    """sweeps/paper-between-{calibration,test}.yaml: the paper's settings, every factor strictly
+    inside the grid's range and on none of its values, the two sets on different values, and
+    at least 100 jobs each (the surrogate's off-grid calibration and test)."""
+    from woundsweep.config.manifest import expand
+
+    paper = load_sweep(PAPER)
+    sets = {k: load_sweep(PAPER.parent / f"paper-between-{k}.yaml") for k in ("calibration", "test")}
+    factors = [
+        "dermal_thickness_mm", "subcutis_thickness_factor", "patch_size_factor",
+        "wound_width_factor", "orientation_deg",
+    ]  # fmt: skip
+    for sweep in sets.values():
+        assert (sweep.materials, sweep.solver, sweep.stages) == (
+            paper.materials,
+            paper.solver,
+            paper.stages,
+        )
+        assert sweep.exclude == paper.exclude
+        assert len(expand(sweep)) >= 100
+        for name in factors:
+            grid = paper.grid[name]
+            for v in sweep.grid[name]:
+                assert min(grid) < v < max(grid) and v not in grid, (name, v)
+        for shape, axes in sweep.shapes.items():
+            for name, values in axes.items():
+                grid = paper.shapes[shape][name]
+                assert all(min(grid) < v < max(grid) and v not in grid for v in values)
+        assert sweep.grid["mesh_size_factor"] == [max(paper.grid["mesh_size_factor"])]
+    cal, test = sets["calibration"], sets["test"]
+    for name in factors:
+        assert not set(cal.grid[name]) & set(test.grid[name]), name

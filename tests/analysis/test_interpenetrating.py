@@ -1,4 +1,4 @@
-"""The interpenetration flag (mirrored zone points overlap) counted and optionally left out of
+"""The interpenetration flag (the flanks pass through each other) counted and optionally left out of
 the stress model; the flag itself is tested in test_closure.py."""
 
 from __future__ import annotations

@@ -202,7 +202,9 @@ def test_between_sweeps_lie_between_the_paper_grid_values() -> None:
     from woundsweep.config.manifest import expand
 
     paper = load_sweep(PAPER)
-    sets = {k: load_sweep(PAPER.parent / f"paper-between-{k}.yaml") for k in ("calibration", "test")}
+    sets = {
+        k: load_sweep(PAPER.parent / f"paper-between-{k}.yaml") for k in ("calibration", "test")
+    }
     factors = [
         "dermal_thickness_mm", "subcutis_thickness_factor", "patch_size_factor",
         "wound_width_factor", "orientation_deg",

@@ -30,10 +30,12 @@ __all__ = [
     "CLI_FAST",
     "CLI_SWEEP",
     "SMALL_SWEEP",
+    "SMOOTH_NOISE",
     "STAGE_RESULT_COLUMNS",
     "depth_level",
     "depth_stress",
     "random_stress",
+    "smooth_stress",
     "write_results",
     "write_store",
 ]
@@ -104,6 +106,26 @@ def depth_stress(df: pd.DataFrame, rng: np.random.Generator, noise: float = 0.05
 def random_stress(df: pd.DataFrame, rng: np.random.Generator) -> np.ndarray:
     """Stress unrelated to any parameter."""
     return rng.lognormal(4.0, 1.0, len(df))
+
+
+SMOOTH_NOISE = 0.05  # smooth_stress's log-normal sigma
+_SKIN_EFFECT = {"soft": -1.0, "normal": 0.0, "stiff": 1.0}
+
+
+def smooth_stress(df: pd.DataFrame, rng: np.random.Generator) -> np.ndarray:
+    """Stress smooth in every factor, monotone in most, independent of the dermal thickness
+    (as the physics: every length scales with it), times log-normal noise (`SMOOTH_NOISE`)."""
+    log = (
+        3.0
+        + 3.0 * depth_level(df)
+        + 0.5 * np.log(df["subcutis_thickness_factor"])
+        - 0.4 * np.log(df["patch_size_factor"])
+        + 1.2 * df["wound_width_factor"] ** 2
+        + 0.3 * np.cos(np.radians(2.0 * df["orientation_deg"]))
+        + 0.3 * df["skin_type"].map(_SKIN_EFFECT)
+        + 0.05 * (df["stage"] - 1)
+    )
+    return np.exp(log + rng.normal(0.0, SMOOTH_NOISE, len(df)))
 
 
 def _locations(df: pd.DataFrame, rng: np.random.Generator) -> dict[str, np.ndarray]:

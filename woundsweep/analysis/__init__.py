@@ -11,8 +11,10 @@ Modules: `settings` (features and constants), `data` (rows from the store's
 validated reader, the model matrix), `splits` (quantile classes, the two schemes),
 `training` (XGBoost), `evaluation` (scores, importances, TreeSHAP), `paper` (stiff against
 soft, locations of the maximum), `fitting` (one scheme end to end, `SchemeFit`),
-`regression` (the stress surrogate of log p99) and `conformal` (its split-conformal
-intervals), `failure` (the failure-probability model), `sensitivity` (Sobol indices,
+`regression` (the stress surrogate of log p99; `surrogate` its common interface,
+`interpolant` the Gaussian-process kind) and `conformal` (its split-conformal intervals),
+`offgrid` (runs between the grid's values: calibration and test), `failure` (the
+failure-probability model), `sensitivity` (Sobol indices,
 SALib), `profile_locations` (Figure 2 from the profile lines), `mesh_sensitivity`
 (matched geometries across mesh size factors), `pipeline` (`run_analysis`), `model_io`
 (model files), `prediction`, `figures` (with `figures_profiles`, `figures_mesh`) and

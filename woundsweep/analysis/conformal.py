@@ -1,7 +1,9 @@
 """Split-conformal prediction intervals for the stress surrogate (log p99, per stage).
 
 Scores are absolute residuals ``|log p99 - prediction|`` on calibration rows whose
-geometries the surrogate never saw. For level ``1 - a`` the half-width is the
+geometries the surrogate never saw, divided by the surrogate's scale of each row (1 for the
+trees, the predictive SD for the Gaussian process: normalised scores, the half-width then
+the score quantile times the row's scale). For level ``1 - a`` the half-width is the
 ``ceil((n + 1)(1 - a))``-th smallest of the ``n`` scores, which covers a new, exchangeable
 row with probability at least ``1 - a`` (Vovk et al. 2005; Lei et al. 2018, "Distribution-
 free predictive inference for regression"). Calibration is per stage (Mondrian): a stage
@@ -49,15 +51,18 @@ def half_widths(
 
 def coverage(
     y: np.ndarray, pred: np.ndarray, stage: np.ndarray, scores: Mapping[str, Sequence[float]],
-    level: float,
+    level: float, scale: np.ndarray | None = None,
 ) -> dict[str, object]:  # fmt: skip
-    """Empirical coverage of the level-``level`` intervals on rows (``y``, ``pred`` in log kPa).
+    """Empirical coverage of the level-``level`` intervals on rows (``y``, ``pred`` in log kPa;
+    ``scale``: each row's score unit, the half-width is the score quantile times it; 1 if None).
 
     Returns the nominal level, rows, covered rows, the empirical fraction, the median interval
     width as a factor (upper / lower bound in kPa) and the same per stage.
     """
     y, pred, stage = (np.asarray(a, dtype=np.float64) for a in (y, pred, stage))
     hw = half_widths(scores, stage, level)
+    if scale is not None:
+        hw = hw * np.asarray(scale, dtype=np.float64)
     inside = np.abs(y - pred) <= hw
 
     def summary(sel: np.ndarray) -> dict[str, object]:

@@ -360,8 +360,8 @@ def write_surrogate(
     y = np.log(rows[STRESS].to_numpy(dtype=np.float64)[test])
     stage = rows["stage"].to_numpy()[test]
     scores = fit.meta["calibration_scores_log"]
-    half = {str(lv): half_widths(scores, stage, lv) for lv in COVERAGE_LEVELS}
-    title = f"stress surrogate: test geometries (n={len(test)})"
+    half = {str(lv): half_widths(scores, stage, lv) * fit.sd_test for lv in COVERAGE_LEVELS}
+    title = f"stress surrogate ({fit.model.kind}): test geometries (n={len(test)})"
     return save(surrogate_test(y, fit.pred_test, half, title), out_dir, "surrogate_test") + save(
         sobol_bars(sobol), out_dir, "sobol"
     )

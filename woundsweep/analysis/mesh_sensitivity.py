@@ -81,13 +81,14 @@ def mesh_importance(metrics: dict[str, Any]) -> dict[str, Any]:
     """The mesh size factor's rank and share per importance measure of the stress models."""
     out: dict[str, Any] = {}
     sur = metrics.get("surrogate", {})
-    if "importance" in sur:
+    if "importance" in sur:  # the trees' own measures
         imp = sur["importance"]
         out["surrogate_total_gain"] = _rank_share(
             {g: v["total_gain"] for g, v in imp["grouped"].items()}
         )
         out["surrogate_mean_abs_shap"] = _rank_share(dict(imp["shap"]["grouped"]))
-        idx = sur.get("sensitivity", {}).get("indices", {})
+    if "sensitivity" in sur:
+        idx = sur["sensitivity"].get("indices", {})
         out["surrogate_sobol_total"] = _rank_share({g: v["ST"] for g, v in idx.items()})
     for scheme, m in metrics.get("schemes", {}).items():
         out[f"classifier_{scheme}_total_gain"] = _rank_share(

@@ -1,6 +1,8 @@
 """Model files: ``model_<scheme>.json`` (the XGBoost booster) and ``model_<scheme>_meta.json``;
-beside them the stress surrogate (``surrogate.json`` + ``surrogate_meta.json``) and the
-failure model (``failure_model.json``, absent when too few jobs failed, + its metadata).
+beside them the stress surrogate (``surrogate.json``: the booster, or the Gaussian processes
+of `interpolant` as JSON, by the metadata's ``surrogate`` kind; + ``surrogate_meta.json``)
+and the failure model (``failure_model.json``, absent when too few jobs failed, + its
+metadata).
 
 The classifier's metadata holds what prediction needs besides the booster: the feature
 order, the shape and skin codes, the per-shape feature ranges and grid values of the
@@ -13,6 +15,7 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, NamedTuple
 
@@ -27,6 +30,7 @@ if TYPE_CHECKING:
     from .failure import FailureFit
     from .fitting import SchemeFit
     from .regression import SurrogateFit
+    from .surrogate import Surrogate
 
 __all__ = [
     "FAILURE_STEM",
@@ -48,8 +52,9 @@ FAILURE_STEM = "failure_model"
 class LoadedModel(NamedTuple):
     """A saved classifier and its metadata; the surrogate and failure model found beside it.
 
-    ``surrogate`` and ``failure`` are (booster, metadata) pairs, ``None`` where absent; a
-    failure model without a booster has ``(None, metadata)`` (its statement says why).
+    ``surrogate`` is a (`Surrogate`, metadata) pair and ``failure`` a (booster, metadata)
+    pair, ``None`` where absent; a failure model without a booster has ``(None, metadata)``
+    (its statement says why).
     """
 
     path: Path
@@ -88,9 +93,10 @@ def save_booster(
 
 def save_companions(out_dir: Path, surrogate: SurrogateFit, failure: FailureFit) -> list[Path]:
     """Write the stress surrogate and the failure model beside the classifiers."""
-    return save_booster(out_dir, SURROGATE_STEM, surrogate.booster, surrogate.meta) + save_booster(
-        out_dir, FAILURE_STEM, failure.booster, failure.meta
-    )
+    paths = [out_dir / f"{SURROGATE_STEM}.json", out_dir / f"{SURROGATE_STEM}_meta.json"]
+    atomic_write_bytes(paths[0], surrogate.model.to_bytes())
+    atomic_write_bytes(paths[1], json_bytes(surrogate.meta))
+    return paths + save_booster(out_dir, FAILURE_STEM, failure.booster, failure.meta)
 
 
 def _read_booster(path: Path) -> xgb.Booster:
@@ -114,14 +120,33 @@ def _read_meta(path: Path, fmt: str, what: str) -> dict[str, Any]:
     return meta
 
 
+def _read_surrogate(path: Path, meta: dict[str, Any]) -> Surrogate:
+    """The surrogate of the kind its metadata names (the trees when it names none)."""
+    from .interpolant import GPSurrogate
+    from .surrogate import TreeSurrogate
+
+    readers: dict[str, Callable[[Path], Surrogate]] = {
+        "trees": lambda p: TreeSurrogate(_read_booster(p), nthread=1),
+        "gp": GPSurrogate.read,
+    }
+    kind = meta.get("surrogate", "trees")
+    if kind not in readers:
+        raise AnalysisError(
+            f"{path.with_name(SURROGATE_STEM + '_meta.json')}: a malformed 'surrogate'"
+        )
+    return readers[kind](path)
+
+
 def _companion(directory: Path, stem: str, fmt: str, what: str) -> tuple[Any, dict] | None:
     meta_path = directory / f"{stem}_meta.json"
     if not meta_path.is_file():
         return None
     meta = _read_meta(meta_path, fmt, what)
     model_path = directory / f"{stem}.json"
-    if not model_path.is_file() and stem == SURROGATE_STEM:  # a surrogate is always saved whole
-        raise AnalysisError(f"{model_path}: missing (its metadata {meta_path.name} is there)")
+    if stem == SURROGATE_STEM:
+        if not model_path.is_file():  # a surrogate is always saved whole
+            raise AnalysisError(f"{model_path}: missing (its metadata {meta_path.name} is there)")
+        return _read_surrogate(model_path, meta), meta
     return (_read_booster(model_path) if model_path.is_file() else None), meta
 
 
@@ -218,7 +243,12 @@ def check_model(model: LoadedModel) -> None:
     if problem:
         raise AnalysisError(f"{model.path.with_name(model.path.stem + '_meta.json')}: {problem}")
     if model.surrogate is not None:
-        sur = {"calibration_scores_log": _scores, "features": _strings, "ranges": _span_map}
+        columns = model.surrogate[0].features  # the metadata's must be the model file's
+        sur = {
+            "calibration_scores_log": _scores,
+            "features": lambda v: _strings(v) and v == columns,
+            "ranges": _span_map,
+        }
         problem = _problem(model.surrogate[1], sur)
         if problem:
             raise AnalysisError(f"{model.path.with_name(SURROGATE_STEM + '_meta.json')}: {problem}")

@@ -36,6 +36,7 @@ from .failure import fit_failure
 from .fitting import fit_scheme
 from .mesh_sensitivity import matched_ratios, mesh_sensitivity
 from .model_io import json_bytes, save_companions, save_model
+from .offgrid import OtherRows, Reference, off_grid_test, read_other, stress_columns
 from .paper import location_summary, normalised_locations, stiff_vs_soft
 from .profile_locations import profile_positions, profile_summary
 from .report import write_report
@@ -62,22 +63,36 @@ def analysis_steps(n_schemes: int) -> int:
 
 
 def _surrogate(
-    rows: pd.DataFrame, X: np.ndarray, settings: ModelSettings, say: Callable[[str], None]
-) -> tuple[Any, dict[str, Any]]:
+    rows: pd.DataFrame, X: np.ndarray, settings: ModelSettings, say: Callable[[str], None],
+    calibration: OtherRows | None = None,
+) -> tuple[Any, dict[str, Any]]:  # fmt: skip
     """The stress surrogate and its metrics with Sobol indices; or None and why not."""
     from .regression import fit_surrogate
     from .sensitivity import surrogate_sobol
 
-    say(f"training the stress surrogate on {len(rows)} rows...")
+    say(f"training the stress surrogate ({settings.surrogate}) on {len(rows)} rows...")
     try:
-        fit = fit_surrogate(rows, X, settings)
+        fit = fit_surrogate(rows, X, settings, calibration)
     except AnalysisError as err:
         return None, {"statement": f"no stress surrogate: {err}"}
     say(f"Sobol indices of the surrogate ({settings.sobol_samples} base samples)...")
-    sobol = surrogate_sobol(
-        fit.booster, fit.meta, settings.sobol_samples, settings.seed, settings.nthread
-    )
+    sobol = surrogate_sobol(fit.model, fit.meta, settings.sobol_samples, settings.seed)
     return fit, {**fit.metrics, "sensitivity": sobol}
+
+
+def _other_paths(rd: Path, calibrate_on: str | Path | None, test_on: str | Path | None) -> None:
+    """Refuse a ``--calibrate-on`` or ``--test-on`` run that is missing, or the same run as
+    the analysed one or the other option's (checked before anything is read)."""
+    named = {"the analysed run": rd.resolve()}
+    for option, path in (("--calibrate-on", calibrate_on), ("--test-on", test_on)):
+        if path is None:
+            continue
+        if not Path(path).is_dir():
+            raise AnalysisError(f"{option} {path}: no such run directory")
+        same = [k for k, v in named.items() if Path(path).resolve() == v]
+        if same:
+            raise AnalysisError(f"{option} {path}: the same run as {same[0]}")
+        named[f"{option}'s"] = Path(path).resolve()
 
 
 class AnalysisOutput(NamedTuple):
@@ -99,6 +114,8 @@ def run_analysis(
     keep_duplicates: bool = False,
     stress: str = STRESS,
     beside: Sequence[str | Path] = (),
+    calibrate_on: str | Path | None = None,
+    test_on: str | Path | None = None,
 ) -> AnalysisOutput:
     """Fit and evaluate each scheme; write metrics, models, figures and report.md.
 
@@ -107,7 +124,9 @@ def run_analysis(
     ``stress`` is the store's column the models learn (a von Mises statistic in kPa); the
     steps below read it under `STRESS`, and metrics.json and the model files name it.
     ``beside`` are runs closed by other closing loads, drawn beside this one's in Figure 2
-    (`woundsweep.analysis.closures`).
+    (`woundsweep.analysis.closures`). ``calibrate_on``: a run (wounds between the grid's
+    values) whose rows calibrate the surrogate's intervals; ``test_on``: a run whose rows
+    test the surrogate and the classifiers and nothing else (`woundsweep.analysis.offgrid`).
     """
     say = echo or (lambda _line: None)
     import xgboost as xgb
@@ -122,6 +141,7 @@ def run_analysis(
     for s in schemes:
         if s not in SCHEMES:
             raise AnalysisError(f"unknown split scheme {s!r} (expected one of {SCHEMES})")
+    _other_paths(rd, calibrate_on, test_on)
     say("reading the results...")
     run = run_or_none(rd)  # the sweep and manifest, read once for every step below
     sweep_analysis, skins = sweep_settings(run)
@@ -156,11 +176,20 @@ def run_analysis(
         )
     features = model_features(rows["wound_shape"].astype(str))
     X = encode_features(rows, skins, features)
+    ref = Reference(
+        stress_columns(results), degree, {str(k): skins[str(k)] for k in set(rows["skin_type"])},
+        sorted({str(s) for s in rows["wound_shape"]}), sorted({int(s) for s in rows["stage"]}),
+        features, {"drop_interpenetrating": drop_interpenetrating, "keep_reopened": keep_reopened,
+                   "keep_duplicates": keep_duplicates, "stress": column},
+    )  # fmt: skip
+    # Read and checked before any training.
+    cal_rows = None if calibrate_on is None else read_other(calibrate_on, "--calibrate-on", ref)
+    test_rows = None if test_on is None else read_other(test_on, "--test-on", ref)
     fits = []
     for s in schemes:
         say(f"training the {s} split model on {len(rows)} rows ({q} quantiles)...")
         fits.append(fit_scheme(s, rows, X, skins, settings))
-    surrogate, surrogate_metrics = _surrogate(rows, X, settings, say)
+    surrogate, surrogate_metrics = _surrogate(rows, X, settings, say, cal_rows)
     say("training the failure model...")
     failure = fit_failure(results, skins, settings)
     svs, pairs = stiff_vs_soft(rows)
@@ -202,6 +231,13 @@ def run_analysis(
     }
     if closures is not None:
         metrics["closures"] = closures
+    if test_rows is not None:
+        metrics["off_grid_test"] = (
+            off_grid_test(surrogate.model, surrogate.meta["calibration_scores_log"], test_rows,
+                          fits, settings.nthread)
+            if surrogate is not None
+            else {"run": test_rows.source, "statement": surrogate_metrics["statement"]}
+        )  # fmt: skip
     metrics["mesh_sensitivity"] = mesh_sensitivity(rows, metrics)
     final = Path(out_dir) if out_dir is not None else RunLayout(rd).analysis_dir
     out = _staging_dir(final)

@@ -9,8 +9,9 @@ weighted linearly in the angle (class probabilities, log stress, failure probabi
 interval is the calibrated half-width around the weighted log stress). The tree models
 alone are piecewise constant in the angle, with their steps at the trained values, so
 their own answer between two trained angles is one neighbour's, whichever side of a split it
-falls. Other parameters between the grid's values are answered by the trees as they are
-and flagged as interpolated.
+falls. A Gaussian-process surrogate (``continuous``) interpolates by itself: it is evaluated
+at the asked angle. Other parameters between the grid's values are answered by the models
+as they are and flagged as interpolated.
 
 Without a mesh size factor the answer is that of the finest mesh trained on for the shape
 (the largest factor), and says so.
@@ -314,7 +315,6 @@ def predict_wound(
         )
     weights = angle_weights(meta, shape, values[ANGLE])
     prob = np.zeros((len(stages), int(meta["quantiles"])))
-    log_est: np.ndarray | None = None if model.surrogate is None else np.zeros(len(stages))
     p_fail: float | None = 0.0
     note = ""
     for angle, w in weights:
@@ -322,10 +322,9 @@ def predict_wound(
         prob += w * predict_proba(
             model.booster, _rows(at, booster_features(model.booster), stages), nthread=1
         )
-        if log_est is not None:
-            log_est += w * _surrogate_log(model, at, stages)
         p, note = _failure(model, at)
         p_fail = None if p is None or p_fail is None else p_fail + w * p
+    log_est = _surrogate_log(model, values, weights, stages)
     estimate, bounds = _surrogate(model, log_est, stages, level)
     edges = meta["quantile_edges_kPa"]
     out = []
@@ -373,34 +372,46 @@ def answer_basis(model: LoadedModel, shape: str, stages: Sequence[int]) -> dict[
         sur = model.surrogate[1]
         scores = sur["calibration_scores_log"]
         out.update(
+            surrogate=model.surrogate[0].kind,
             surrogate_training_rows=sur.get("training_rows"),
             calibration_rows=sum(len(v) for v in scores.values()),
             calibration_rows_by_stage={str(s): len(scores.get(str(s), [])) for s in stages},
             calibration_geometries=sur.get("calibration_geometries"),
+            calibration=sur.get("calibration"),
         )
     return out
 
 
 def _surrogate_log(
-    model: LoadedModel, values: Mapping[str, float], stages: Sequence[int]
-) -> np.ndarray:
-    """The surrogate's log p99 (log kPa) per stage."""
-    from .regression import predict_log
-
-    booster = model.surrogate[0]  # type: ignore[index]
-    return predict_log(booster, _rows(values, booster_features(booster), stages), nthread=1)
+    model: LoadedModel, values: Mapping[str, float], weights: Sequence[tuple[float, float]],
+    stages: Sequence[int],
+) -> tuple[np.ndarray, np.ndarray] | None:  # fmt: skip
+    """The surrogate's log p99 (log kPa) and its scale per stage: weighted over the trained
+    orientations ``weights``, or at the asked one for a continuous surrogate; None without."""
+    if model.surrogate is None:
+        return None
+    sur = model.surrogate[0]
+    if sur.continuous:
+        weights = [(values[ANGLE], 1.0)]
+    log_est, scale = np.zeros(len(stages)), np.zeros(len(stages))
+    for angle, w in weights:
+        mean, sd = sur.predict_log(_rows({**values, ANGLE: angle}, sur.features, stages))
+        log_est, scale = log_est + w * mean, scale + w * sd
+    return log_est, scale
 
 
 def _surrogate(
-    model: LoadedModel, log_est: np.ndarray | None, stages: Sequence[int], level: float
-) -> tuple[list[float] | None, list[tuple[float | None, float | None]] | None]:
-    """The surrogate's estimates (kPa) and interval bounds per stage around its log p99
-    ``log_est``; ``None`` without a surrogate."""
-    if model.surrogate is None or log_est is None:
+    model: LoadedModel, answer: tuple[np.ndarray, np.ndarray] | None, stages: Sequence[int],
+    level: float,
+) -> tuple[list[float] | None, list[tuple[float | None, float | None]] | None]:  # fmt: skip
+    """The surrogate's estimates (kPa) and interval bounds per stage around its log p99 and
+    scale ``answer``; ``None`` without a surrogate."""
+    if model.surrogate is None or answer is None:
         return None, None
     from .conformal import half_widths
 
-    hw = half_widths(model.surrogate[1]["calibration_scores_log"], stages, level)
+    log_est, scale = answer
+    hw = half_widths(model.surrogate[1]["calibration_scores_log"], stages, level) * scale
     est = [float(np.exp(v)) for v in log_est]
     bounds: list[tuple[float | None, float | None]] = [
         (float(np.exp(v - h)), float(np.exp(v + h))) if np.isfinite(h) else (None, None)

@@ -9,6 +9,7 @@ from typing import Any
 from ..core.fsutil import atomic_write_bytes
 from .closures import report_lines as closure_report_lines
 from .mesh_sensitivity import report_lines as mesh_report_lines
+from .offgrid import report_lines as off_grid_report_lines
 from .profile_locations import report_lines as profile_report_lines
 
 __all__ = ["PAPER", "auc_text", "render_report", "summary", "write_report"]
@@ -136,7 +137,8 @@ def render_report(metrics: dict[str, Any], figures: Sequence[str]) -> str:
         f"Rows whose sutured zone has reopened (surface gap above the closure tolerance): "
         f"{rows.get('reopened_rows', 0)}"
         f"{', left out' if rows.get('reopened_dropped', True) else ', kept'}; rows whose "
-        f"mirrored zone points overlap: {rows.get('interpenetrating_rows', 0)}"
+        f"flanks pass through each other (mirrored zone points overlap, or the audit finds flank"
+        f" nodes inside the other side): {rows.get('interpenetrating_rows', 0)}"
         f"{', left out' if rows.get('interpenetrating_dropped') else ', kept'}.",
         *(
             [
@@ -229,6 +231,7 @@ def render_report(metrics: dict[str, Any], figures: Sequence[str]) -> str:
             f"({st['stiff_greater']:,}/{st['pairs']:,}) | {p} | {by_geometry(st)} |"
         )
     lines += surrogate_lines(metrics)
+    lines += off_grid_report_lines(metrics)
     if "max_location_profiles" in metrics:
         lines += profile_report_lines(metrics)
     lines += closure_report_lines(metrics)
@@ -278,10 +281,8 @@ def surrogate_lines(metrics: dict[str, Any]) -> list[str]:
             for k in ("train", "stop", "calibration", "test")
         )
         lines += [
-            "XGBoost regression of log p99 (stage as a feature); split-conformal intervals from "
-            "absolute log residuals of calibration rows whose geometries training never saw, "
-            "calibrated per stage. Rows (geometries) train / early stopping / calibration / test: "
-            f"{sizes}. Test RMSE {_f(t['rmse_log'])} in log stress, R² {_f(t['r2_log'])}.",
+            f"{_surrogate_text(sur)} Rows (geometries) train / early stopping / calibration / "
+            f"test: {sizes}. Test RMSE {_f(t['rmse_log'])} in log stress, R² {_f(t['r2_log'])}.",
             "",
             *(
                 [
@@ -304,39 +305,64 @@ def surrogate_lines(metrics: dict[str, Any]) -> list[str]:
             )
     lines += ["", "## Failure model (jobs that did not converge)", "", fail.get("statement", "n/a")]
     lines += ["", "## Which parameters matter", ""]
-    if "importance" in sur:
+    if "importance" in sur or "sensitivity" in sur:
         lines += importance_table(metrics)
     return lines
 
 
+def _surrogate_text(sur: dict[str, Any]) -> str:
+    """What the surrogate is and how its intervals were calibrated, in words."""
+    cal = sur.get("calibration", "")
+    if sur.get("surrogate", "trees") == "trees":
+        return (
+            "XGBoost regression of log p99 (stage as a feature); intervals: "
+            f"{cal} (calibration rows whose geometries training never saw)."
+        )
+    gp = sur["gp"]
+    floor = gp["noise_floor_log_sd"]
+    return (
+        f"Gaussian processes of log p99, one per wound shape, skin type and stage "
+        f"({gp['groups']} groups; {gp['kernel']}, hyperparameters fitted), on the "
+        "dimensionless factors: the stresses do not depend on `dermal_thickness_mm`, so rows "
+        f"that differ only in it are averaged ({gp['rows']:,} training rows into "
+        f"{gp['points']:,} points; their spread, the noise floor, is "
+        f"{'n/a' if floor is None else format(floor, '.3g')} in log stress). The early-stopping "
+        f"rows train too. Intervals: {cal}."
+    )
+
+
 def importance_table(metrics: dict[str, Any]) -> list[str]:
-    """Split counts and total gain (classifier), TreeSHAP and Sobol indices (surrogate)."""
+    """Split counts and total gain (classifier), TreeSHAP (tree surrogate) and Sobol indices
+    (surrogate); n/a where a measure does not apply."""
     sur = metrics["surrogate"]
     cls = next(iter(metrics["schemes"].values()), None)
-    shap = sur["importance"]["shap"]["grouped"]
+    shap = sur.get("importance", {}).get("shap", {}).get("grouped", {})
     sob = sur["sensitivity"]
     idx = sob["indices"]
     top = sob["ranking_total"][:3]
     lines = [
         f"Top three by Sobol total index: {', '.join(top)}. Sobol indices of the surrogate's "
         f"log p99 over the grid's values ({sob['evaluations']:,} surrogate calls, 95% bootstrap "
-        "half-widths); mean |SHAP| in log stress (TreeSHAP, XGBoost pred_contribs, all rows). "
-        "Split counts and total gain: "
+        "half-widths); mean |SHAP| in log stress (TreeSHAP, XGBoost pred_contribs, all rows; "
+        "the tree surrogate only). Split counts and total gain: "
         + (f"the {next(iter(metrics['schemes']))} split classifier." if cls else "n/a."),
         "",
         "| parameter | splits (classifier) | total gain (classifier) | total gain (surrogate) "
         "| mean abs SHAP | Sobol S1 | Sobol ST |",
         "|---|---|---|---|---|---|---|",
     ]
-    for g in sorted(shap, key=lambda g: (-idx.get(g, {}).get("ST", -1.0), -shap[g], g)):
+    names = set(shap) | set(idx)
+    if cls:
+        names |= set(cls["importance"]["grouped"])
+    for g in sorted(names, key=lambda g: (-idx.get(g, {}).get("ST", -1.0), -shap.get(g, 0.0), g)):
         c = cls["importance"]["grouped"].get(g) if cls else None
-        sg = sur["importance"]["grouped"].get(g, {})
+        sg = sur.get("importance", {}).get("grouped", {}).get(g, {})
         si = idx.get(g)
         s1 = "fixed" if si is None else f"{si['S1']:.3f} ± {si['S1_conf']:.3f}"
         st = "fixed" if si is None else f"{si['ST']:.3f} ± {si['ST_conf']:.3f}"
         lines.append(
             f"| {g} | {_f(c and c['weight'], '.0f')} | {_f(c and c['total_gain'], '.4g')} "
-            f"| {_f(sg.get('total_gain'), '.4g')} | {shap[g]:.4f} | {s1} | {st} |"
+            f"| {_f(sg.get('total_gain'), '.4g')} | {_f(shap.get(g), '.4f')} | {s1} | {st} |"
         )
     lines += zero_index_notes(idx)
     return lines

@@ -24,6 +24,8 @@ from .settings import FEATURES, IMPORTANCE_GROUPS, SHAPE_CODES, SHAPE_FACTORS
 if TYPE_CHECKING:
     import xgboost as xgb
 
+    from .surrogate import Surrogate
+
 __all__ = ["SobolInput", "sobol_indices", "surrogate_inputs", "surrogate_sobol"]
 
 
@@ -191,13 +193,16 @@ def surrogate_function(
 
 
 def surrogate_sobol(
-    booster: xgb.Booster, meta: dict[str, Any], n_base: int, seed: int, nthread: int = 2
-) -> dict[str, Any]:
-    """Sobol indices of the surrogate's log p99 over its training grid (`fit_surrogate` meta)."""
-    from .regression import predict_log
+    model: Surrogate | xgb.Booster, meta: dict[str, Any], n_base: int, seed: int,
+    nthread: int = 2,
+) -> dict[str, Any]:  # fmt: skip
+    """Sobol indices of the surrogate's log p99 (its mean) over its training grid
+    (`fit_surrogate` meta); ``model`` a `Surrogate` or a bare booster (``nthread`` threads)."""
+    from .surrogate import as_surrogate
 
+    sur = as_surrogate(model, nthread)
     inputs, fixed = surrogate_inputs(meta)
-    func = surrogate_function(lambda X: predict_log(booster, X, nthread), inputs, fixed, meta)
+    func = surrogate_function(lambda X: sur.predict_log(X)[0], inputs, fixed, meta)
     out = sobol_indices(func, [c.name for c in inputs], n_base, seed)
     out["output"] = "log p99 von Mises (log kPa) of the stress surrogate"
     out["inputs"] = {

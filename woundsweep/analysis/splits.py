@@ -63,11 +63,14 @@ def random_split(n: int, train_fraction: float, validation_fraction: float, seed
     return Split(*(np.sort(p) for p in parts))
 
 
-def geometry_groups(rows: pd.DataFrame) -> np.ndarray:
-    """Integer id of each row's physical geometry (geometry keys without the mesh size)."""
+def geometry_groups(rows: pd.DataFrame, scale_free: bool = False) -> np.ndarray:
+    """Integer id of each row's physical geometry (geometry keys without the mesh size);
+    ``scale_free``: without the dermal thickness too (the geometries of one dimensionless
+    wound, which a scale-invariant model cannot tell apart, are one group)."""
     from ..config.sweep import GEOMETRY_KEYS
 
-    keys = [k for k in GEOMETRY_KEYS if k != "mesh_size_factor"]
+    left_out = ("mesh_size_factor", "dermal_thickness_mm") if scale_free else ("mesh_size_factor",)
+    keys = [k for k in GEOMETRY_KEYS if k not in left_out]
     # NaN is not equal to itself: turn the not-applicable factors into a sentinel first.
     frame = rows[keys].astype(object).where(rows[keys].notna(), "n/a").astype(str)
     return pd.MultiIndex.from_frame(frame).factorize()[0]

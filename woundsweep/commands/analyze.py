@@ -58,6 +58,17 @@ def summary_lines(metrics: dict[str, Any]) -> list[str]:
         )
     else:
         lines.append(sur.get("statement", "no stress surrogate"))
+    off = metrics.get("off_grid_test")
+    if off is not None and "coverage" in off:
+        cov = ", ".join(
+            f"{_pct(c['empirical'])} at {float(lv):.0%}" for lv, c in off["coverage"].items()
+        )
+        lines.append(
+            f"off the grid ({off['run']}, {off['rows']} rows): coverage {cov}, median "
+            f"error {_pct(off['median_relative_error'])}"
+        )
+    elif off is not None:
+        lines.append(f"off the grid ({off['run']}): {off['statement']}")
     lines.append(f"failure model: {metrics.get('failure', {}).get('statement', 'n/a')}")
     for shape, st in metrics["stiff_vs_soft"].items():
         lines.append(
@@ -88,7 +99,7 @@ def summary_lines(metrics: dict[str, Any]) -> list[str]:
 )  # fmt: skip
 @click.option(
     "--drop-interpenetrating", is_flag=True,
-    help="Leave out the rows whose mirrored zone points overlap (interpenetrating = 1).",
+    help="Leave out the rows whose flanks pass through each other (interpenetrating = 1).",
 )  # fmt: skip
 @click.option(
     "--keep-reopened", is_flag=True,
@@ -109,6 +120,19 @@ def summary_lines(metrics: dict[str, Any]) -> list[str]:
     help="A run of the same jobs closed by another stages.closure_load: its Figure 2 is drawn "
     "beside this run's, and the report compares them (repeatable).",
 )  # fmt: skip
+@click.option(
+    "--calibrate-on", "calibrate_on", metavar="RUN_DIR", default=None,
+    type=click.Path(file_okay=False, path_type=Path),
+    help="Calibrate the stress surrogate's intervals on this run's rows (wounds between the "
+    "grid's values) instead of held-out grid geometries.",
+)  # fmt: skip
+@click.option(
+    "--test-on", "test_on", metavar="RUN_DIR", default=None,
+    type=click.Path(file_okay=False, path_type=Path),
+    help="Report on this run's rows, used for nothing else: the surrogate's coverage at 80% and "
+    "95%, its median error, and the quantile-class accuracy of the surrogate and the "
+    "classifiers.",
+)  # fmt: skip
 def cmd(
     run_dir: Path,
     quantiles: int | None,
@@ -121,13 +145,17 @@ def cmd(
     keep_duplicates: bool,
     stress: str,
     beside: tuple[Path, ...],
+    calibrate_on: Path | None,
+    test_on: Path | None,
 ) -> None:
     """Fit the stress-quantile model (XGBoost) and write RUN_DIR/analysis/.
 
     Uses the converged rows of RUN_DIR/results with a positive maximal stress (volume-weighted
     p99 von Mises, kPa). Writes metrics.json, model_<split>.json (+ _meta.json), PNG and SVG
     figures and report.md. Settings: defaults, then the sweep's `analysis` section, then
-    --param, then the dedicated flags.
+    --param, then the dedicated flags (the stress surrogate: --param surrogate=trees|gp).
+    --calibrate-on and --test-on take runs of wounds between the grid's values; their rows
+    must have the same stress columns, element degree, skin types, shapes and stages.
     """
     from tqdm import tqdm
 
@@ -164,6 +192,8 @@ def cmd(
             keep_duplicates=keep_duplicates,
             stress=stress,
             beside=beside,
+            calibrate_on=calibrate_on,
+            test_on=test_on,
         )
         bar.update(bar.total - bar.n)
     except BaseException:

@@ -221,6 +221,11 @@ def _basis_lines(basis: dict[str, Any], q: int) -> list[str]:
             f"surrogate never saw ({by}); it holds on average over new geometries inside the "
             "training ranges"
         )
+        if basis.get("calibration"):
+            lines.append(
+                f"stress surrogate: {basis.get('surrogate', 'trees')}; calibration: "
+                f"{basis['calibration']}"
+            )
     return lines
 
 
@@ -282,8 +287,9 @@ def cmd(
     The orientation is --orientation (the stiff axis' angle to x) or --angle-to-langer DEG
     (the wound's long axis against the Langer line; orientation = 90 - DEG). Between two
     trained orientations the models are evaluated at both and their answers weighted
-    linearly in the angle. Other values between the trained grid values are answered by the
-    trees as they are and flagged as interpolated; values outside the trained ranges are
+    linearly in the angle (a Gaussian-process surrogate, `analyze --param surrogate=gp`, is
+    evaluated at the angle itself). Other values between the trained grid values are
+    answered by the models as they are and flagged as interpolated; values outside the trained ranges are
     refused unless --allow-extrapolation. Without --mesh-size-factor the answer is for the
     finest mesh trained on for the shape (stated).
 

@@ -1,5 +1,5 @@
 """The stress model's settings: the sweep's ``analysis`` section (quantiles, split fractions,
-XGBoost hyperparameters), with each default written once here."""
+XGBoost hyperparameters, the stress surrogate's kind), with each default written once here."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ from typing import Any
 
 from ..core.errors import AnalysisError
 
-__all__ = ["INT_RANGES", "ModelSettings", "resolve_settings"]
+__all__ = ["CHOICES", "INT_RANGES", "ModelSettings", "resolve_settings"]
 
 # The integer settings' ranges, both ends allowed (XGBoost takes a 32-bit unsigned seed).
 INT_RANGES = {
@@ -22,11 +22,18 @@ INT_RANGES = {
     "nthread": (1, 1024),
     "sobol_samples": (16, 2**16),
 }
+# The named settings' values (the first is the default).
+CHOICES = {
+    # The stress surrogate: XGBoost trees, or Gaussian processes that interpolate between
+    # the grid's values (`woundsweep.analysis.interpolant`).
+    "surrogate": ("trees", "gp"),
+}
 
 
 @dataclasses.dataclass(frozen=True)
 class ModelSettings:
-    """Quantiles, split fractions and XGBoost hyperparameters (``Sweep.analysis`` keys)."""
+    """Quantiles, split fractions, XGBoost hyperparameters and the stress surrogate's kind
+    (``Sweep.analysis`` keys)."""
 
     quantiles: int = 8
     seed: int = 0
@@ -42,9 +49,17 @@ class ModelSettings:
     reg_lambda: float = 1.0
     nthread: int = 2  # fixed, so that identical seeds give identical models
     sobol_samples: int = 1024  # Saltelli base samples N (a power of 2): N (d + 2) surrogate calls
+    surrogate: str = "trees"  # one of CHOICES["surrogate"]
 
     def check(self) -> ModelSettings:
-        """Raise `AnalysisError` on values XGBoost or the splits cannot use (`INT_RANGES`)."""
+        """Raise `AnalysisError` on values XGBoost or the splits cannot use (`INT_RANGES`,
+        `CHOICES`)."""
+        for name, allowed in CHOICES.items():
+            if getattr(self, name) not in allowed:
+                raise AnalysisError(
+                    f"analysis.{name}: expected one of {', '.join(allowed)}, "
+                    f"got {getattr(self, name)!r}"
+                )
         for name, (lo, hi) in INT_RANGES.items():
             if not lo <= getattr(self, name) <= hi:
                 raise AnalysisError(
@@ -92,6 +107,10 @@ class ModelSettings:
 
 
 def _coerce(name: str, value: Any, kind: type) -> Any:
+    if kind is str:
+        if not isinstance(value, str):
+            raise AnalysisError(f"analysis.{name}: expected a name, got {value!r}")
+        return value.strip()
     try:
         if kind is int:
             f = float(value)
@@ -106,9 +125,14 @@ def _coerce(name: str, value: Any, kind: type) -> Any:
         raise AnalysisError(f"analysis.{name}: expected {kind.__name__}, got {value!r}") from None
 
 
+# A field's annotation -> its type.
+_KINDS: dict[str, type] = {"int": int, "float": float, "str": str}
+
+
 def resolve_settings(*layers: Mapping[str, Any] | None) -> ModelSettings:
     """Overlay mappings (e.g. ``Sweep.analysis``, then command-line values) on the defaults."""
-    fields = {f.name: f.type for f in dataclasses.fields(ModelSettings)}
+    # Annotations are text here (`from __future__ import annotations`).
+    fields = {f.name: str(f.type) for f in dataclasses.fields(ModelSettings)}
     values: dict[str, Any] = {}
     for layer in layers:
         for key, value in (layer or {}).items():
@@ -117,5 +141,5 @@ def resolve_settings(*layers: Mapping[str, Any] | None) -> ModelSettings:
                     f"analysis.{key}: unknown setting (expected one of {sorted(fields)})"
                 )
             if value is not None:
-                values[key] = _coerce(key, value, int if fields[key] in ("int", int) else float)
+                values[key] = _coerce(key, value, _KINDS.get(fields[key], float))
     return ModelSettings(**values).check()

@@ -196,7 +196,8 @@ class StageResult(NamedTuple):
     closure_overlap_mm: float | None = None
     # Stages 2-6: 1 if the sutured zone is closed at the surface, 0 if it has reopened.
     closed: int | None = None
-    # Stages 2-6: 1 if mirrored zone points overlap (the flanks pass through each other).
+    # Stages 2-6: 1 if the flanks pass through each other: mirrored zone points overlap, or the
+    # audit (`contact.audit`) finds flank nodes inside the other side's deformed tissue.
     interpenetrating: int | None = None
     min_J: float | None = None
     n_penetrating: int | None = None  # contact stages (4-6) only

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 __all__ = [
     "FAILURE_FORMAT",
+    "GP_SURROGATE_FORMAT",
     "MESH_CACHE_FORMAT",
     "MESH_LAW_VERSION",
     "MODEL_FORMAT",
@@ -32,5 +33,8 @@ STATISTICS_VERSION = 3
 MESH_CACHE_FORMAT = 2
 # The trained models' metadata (`woundsweep.analysis`).
 MODEL_FORMAT = "woundsweep-quantile-model/1"
-SURROGATE_FORMAT = "woundsweep-stress-surrogate/1"
+SURROGATE_FORMAT = "woundsweep-stress-surrogate/2"
+# The Gaussian-process surrogate's own file (`woundsweep.analysis.interpolant`): per group its
+# kernel hyperparameters, training inputs and targets (no pickle; loading refits the posterior).
+GP_SURROGATE_FORMAT = "woundsweep-gp-surrogate/1"
 FAILURE_FORMAT = "woundsweep-failure-model/1"

@@ -12,24 +12,12 @@ from pathlib import Path
 
 import pandas as pd
 import pytest
-from synthetic_store import SMALL_SWEEP, depth_stress, write_store
+from synthetic_store import PREDICT_FAST, PREDICT_SWEEP, depth_stress, write_store
 
 from woundsweep.cli import main
 from woundsweep.store.reader import read_results
 
-# 12 geometries x 3 skins x 3 orientations = 108 jobs x 6 stages = 648 rows (as
-# test_surrogate_cli.py: classifier, surrogate with its calibration, failure statement).
-SWEEP = {
-    **SMALL_SWEEP,
-    "grid": {
-        **SMALL_SWEEP["grid"],
-        "dermal_thickness_mm": [1],
-        "subcutis_thickness_factor": [1],
-        "patch_size_factor": [2],
-    },
-}
-FAST = ["--param", "n_estimators=20", "--param", "learning_rate=0.3",
-        "--param", "early_stopping_rounds=5", "--param", "sobol_samples=256"]  # fmt: skip
+SWEEP, FAST = PREDICT_SWEEP, PREDICT_FAST
 # A table column -> the one-wound option.
 FLAGS = {
     "wound_shape": "--shape", "dermal_thickness_mm": "--dermal-thickness",

@@ -29,6 +29,8 @@ from woundsweep.store.writer import AttemptOutcome, Store
 __all__ = [
     "CLI_FAST",
     "CLI_SWEEP",
+    "PREDICT_FAST",
+    "PREDICT_SWEEP",
     "SMALL_SWEEP",
     "SMOOTH_NOISE",
     "STAGE_RESULT_COLUMNS",
@@ -79,6 +81,21 @@ CLI_FAST = [
     "--param",
     "early_stopping_rounds=5",
 ]
+
+# The predict tests' store (tests/commands/test_surrogate_cli.py, test_predict_table.py):
+# 12 geometries x 3 skins x 3 orientations = 108 jobs x 6 stages = 648 rows, and `analyze`
+# options that train it fast.
+PREDICT_SWEEP: dict[str, Any] = {
+    **SMALL_SWEEP,
+    "grid": {
+        **SMALL_SWEEP["grid"],
+        "dermal_thickness_mm": [1],
+        "subcutis_thickness_factor": [1],
+        "patch_size_factor": [2],
+    },
+}
+PREDICT_FAST = ["--param", "n_estimators=20", "--param", "learning_rate=0.3",
+                "--param", "early_stopping_rounds=5", "--param", "sobol_samples=256"]  # fmt: skip
 
 StressFn = Callable[[pd.DataFrame, np.random.Generator], np.ndarray]
 

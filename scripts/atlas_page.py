@@ -1,0 +1,276 @@
+"""Write docs/atlas.md: the charted paper grid beside the paper's own results.
+
+    python scripts/atlas_page.py runs/chart-paper --table charted/paper.parquet \
+        [--beside runs/chart-paper-code]
+
+Reads the packed table (what is charted and its CPU time), the run's `woundsweep analyze`
+output (``analysis/metrics.json`` and ``report.md``), the Figure 2 positions of the run and of
+every ``--beside`` run (another closing load on a share of the same jobs) and the paper's
+numbers (`PAPER`, from its Results and Figures 2-3). Writes the generated part of the page
+above the line `MARK` and keeps what is below it (the hand-written reasons for each
+difference); copies the figures to ``figures/atlas/`` beside the page.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import re
+import shutil
+import sys
+from pathlib import Path
+from typing import Any
+
+from woundsweep.analysis.closures import closure_rows, closure_summary
+from woundsweep.config.manifest import load_run
+from woundsweep.store.packed import read_packed
+
+MARK = "<!-- written by hand below -->"
+# Figure 3's panels (A and B: training curves, C: split-count importance, D: ROCs), Figure 2,
+# and the figures the paper did not have.
+FIGURES = (
+    "training_random.png", "importance_random.png", "roc_random.png", "roc_geometry.png",
+    "max_location_profiles.png", "max_location.png", "stiff_vs_soft.png",
+    "stress_distribution.png", "surrogate_test.png", "sobol.png", "mesh_sensitivity.png",
+)  # fmt: skip
+# The paper's Results (paper.md, "Results"; Figure 3's caption).
+PAPER = {
+    "rows": "11,664 x 6 = 69,984",
+    "converged": "68,806 (98.3 %)",
+    "cylindrical": "93.5 % (10,819/11,566), p < 0.001",
+    "wedge": "79.9 % (8,873/11,105), p < 0.001",
+    "modelled": "68,592 (stress > 0)",
+    "split": "43,214 / 18,519 / 6,859",
+    "auc": "above 0.85, micro = macro",
+    "split_count": "wound depth, then stage",
+    "along": "at the zone's ends (1/3, 2/3) under the Dirichlet closure, far less under Neumann",
+}
+
+
+def _pct(a: float, b: float) -> str:
+    return f"{100 * a / b:.1f} %" if b else "n/a"
+
+
+def charted(table: Path, run: Path) -> dict[str, Any]:
+    """What the packed table holds: jobs, rows, converged rows, jobs through six stages per
+    orientation, CPU time and the table's size."""
+    t, meta = read_packed(table)
+    df = t.to_pandas()
+    jobs = df.groupby("job_id").first()
+    six = df.groupby("job_id")["status"].agg(lambda s: bool((s == "converged").all()))
+    by_orient = {
+        float(o): (int(six.loc[g.index].sum()), len(g)) for o, g in jobs.groupby("orientation_deg")
+    }
+    cpu = float(jobs["total_cpu_time_s"].sum())
+    return {
+        "jobs": len(jobs),
+        "total": len(load_run(run).manifest),
+        "rows": len(df),
+        "converged_rows": int((df["status"] == "converged").sum()),
+        "six": by_orient,
+        "cpu_h": cpu / 3600,
+        "cpu_per_job": cpu / max(len(jobs), 1),
+        "bytes": table.stat().st_size,
+        "sweep": meta.get("sweep"),
+    }
+
+
+def at_ends(runs: list[Path]) -> dict[str, dict[str, str]]:
+    """Per closing load and stage group: the share of converged rows whose along-wound maximum
+    lies near the closure zone's ends (`woundsweep.analysis.closures`)."""
+    out: dict[str, dict[str, str]] = {}
+    for load, entry in closure_summary([closure_rows(r) for r in runs]).items():
+        out[load] = {
+            k: f"{100 * g['at_zone_ends']:.0f} % of {g['rows']:,}"
+            if g["at_zone_ends"] is not None
+            else "n/a"
+            for k, g in entry["groups"].items()
+        }
+    return out
+
+
+def _auc(test: dict[str, Any]) -> str:
+    ci = (test.get("auc_macro_interval") or {}).get("ci95")
+    band = f" (95 % {ci[0]:.3f}-{ci[1]:.3f} over test geometries)" if ci else ""
+    per = [a for a in test["auc_per_quantile"] if a is not None]
+    low = f"{min(per):.3f}" if per else "n/a"
+    absent = len(test["auc_per_quantile"]) - len(per)
+    gone = f" ({absent} classes absent from the test rows)" if absent else ""
+
+    def f(x: float | None) -> str:
+        return "n/a" if x is None else f"{x:.3f}"
+
+    return (
+        f"macro {f(test['auc_macro'])}{band}, micro {f(test['auc_micro'])},"
+        f" lowest class {low}{gone}"
+    )
+
+
+def _stiff(m: dict[str, Any], shape: str) -> str:
+    s = m.get("stiff_vs_soft", {}).get(shape) or {}
+    if not s.get("pairs"):
+        return "no stiff/soft pairs charted"
+    return (
+        f"{100 * s['fraction_stiff_greater']:.1f} % ({s['stiff_greater']:,}/{s['pairs']:,}),"
+        f" p = {s['sign_test_p']:.2g}"
+    )
+
+
+def _ranking(names: list[str], n: int = 4) -> str:
+    return ", ".join(names[:n]) if names else "n/a"
+
+
+def _coverage(cov: dict[str, Any]) -> str:
+    def one(level: str) -> str:
+        c = cov.get(level)
+        return f"{c['empirical']:.3f} ({c['covered']:,}/{c['rows']:,})" if c else "n/a"
+
+    return f"{one('0.8')} / {one('0.95')}"
+
+
+def _off_grid(m: dict[str, Any]) -> list[str]:
+    t = m.get("off_grid_test")
+    if not t:
+        return ["| surrogate off the grid (`--test-on`) | none | not measured |"]
+    q = t["quantile_classes"]
+    return [
+        f"| surrogate off the grid: coverage at 80 % / 95 % | none | {_coverage(t['coverage'])},"
+        f" {t['rows']:,} rows of {t['geometries']} geometries never fitted or calibrated on |",
+        f"| surrogate off the grid: median error | none | {100 * t['median_relative_error']:.1f} % |",
+        "| surrogate off the grid: quantile class exact / within one (geometry split's edges) |"
+        f" none | {q['geometry']['surrogate_accuracy']:.2f} / {q['geometry']['surrogate_within_one']:.2f}"
+        f" (classifier {q['geometry']['classifier_accuracy']:.2f} /"
+        f" {q['geometry']['classifier_within_one']:.2f}) |",
+    ]
+
+
+def table(c: dict[str, Any], m: dict[str, Any], ends: dict[str, dict[str, str]], load: str) -> str:
+    """The side-by-side table, one row per result of the paper and what the project adds."""
+    rows = m["rows"]
+    rnd, geo = m["schemes"].get("random", {}), m["schemes"].get("geometry", {})
+    sur = m.get("surrogate", {})
+    sens = sur.get("sensitivity", {})
+    six = ", ".join(f"{o:g} deg {a:,}/{b:,}" for o, (a, b) in sorted(c["six"].items()))
+    split = rnd.get("split_rows", {})
+    imp = rnd.get("importance", {})
+    mesh = m.get("mesh_sensitivity", {}).get("importance", {}).get("surrogate_sobol_total")
+    lines = [
+        "| | paper | ours |",
+        "|---|---|---|",
+        f"| jobs x stages | {PAPER['rows']} | {c['jobs']:,} x 6 = {c['rows']:,}"
+        f" ({_pct(c['jobs'], c['total'])} of the grid) |",
+        f"| converged stage results | {PAPER['converged']} | {c['converged_rows']:,}"
+        f" ({_pct(c['converged_rows'], c['rows'])}); jobs through six stages: {six} |",
+        f"| stiff > soft, curved wounds (sign test) | {PAPER['cylindrical']} |"
+        f" {_stiff(m, 'cylindrical')} |",
+        f"| stiff > soft, wedges (sign test) | {PAPER['wedge']} | {_stiff(m, 'wedge')} |",
+        f"| rows modelled | {PAPER['modelled']} | {rows['used_rows']:,}"
+        f" ({rows.get('duplicate_rows', 0):,} repeating an earlier stage's state left out;"
+        f" {rows.get('interpenetrating_rows', 0):,} with flanks inside each other kept) |",
+        f"| split train / validation / test (random) | {PAPER['split']} |"
+        f" {split.get('train', 0):,} / {split.get('validation', 0):,} / {split.get('test', 0):,} |",
+    ]
+    if rnd:
+        lines.append(f"| AUC, random split | {PAPER['auc']} | {_auc(rnd['test'])} |")
+    if geo:
+        lines.append(
+            f"| AUC, geometry split (unseen geometries) | not done | {_auc(geo['test'])} |"
+        )
+    lines += [
+        f"| most important: split count (the paper's measure) | {PAPER['split_count']} |"
+        f" {_ranking(imp.get('ranking_weight', []))} |",
+        f"| most important: total gain | not given | {_ranking(imp.get('ranking_total_gain', []))} |",
+        "| most important: Sobol total index of the surrogate | not done |"
+        f" {_ranking(sens.get('ranking_total', []))} |",
+    ]
+    for name, groups in ends.items():
+        lines.append(
+            f"| Figure 2, along-wound maximum at the zone's ends ({name} closure):"
+            f" stage 2; stages 3-6 | {PAPER['along'] if name == load else 'not done'} |"
+            f" {groups.get('stage 2', 'n/a')}; {groups.get('stages 3-6', 'n/a')} |"
+        )
+    lines += [
+        "| surrogate interval coverage at 80 % / 95 %, held-out grid geometries | none |"
+        f" {_coverage(sur.get('test', {}).get('coverage', {}))} ({sur.get('surrogate', 'trees')}) |",
+        *_off_grid(m),
+        f"| failure model | none | {m.get('failure', {}).get('statement', 'trained')} |",
+        "| mesh factor's share of the Sobol total | not done |"
+        + (
+            f" {100 * mesh['share']:.2f} % (rank {mesh['rank']} of {mesh['of']}) |"
+            if mesh
+            else " n/a |"
+        ),
+    ]
+    return "\n".join(lines)
+
+
+def page(run: Path, table_path: Path, beside: list[Path]) -> tuple[str, dict[str, Any]]:
+    """The generated part of docs/atlas.md and the charted counts."""
+    analysis = run / "analysis"
+    m = json.loads((analysis / "metrics.json").read_text())
+    c = charted(table_path, run)
+    load = load_run(run).sweep.stages.closure_load
+    report = (analysis / "report.md").read_text()
+    report = re.sub(r"^# .*\n", "", report)
+    report = re.sub(r"\(([\w]+\.(?:png|svg))\)", r"(figures/atlas/\1)", report)
+    report = re.sub(r"^## ", "### ", report, flags=re.M)
+    text = f"""# The atlas charted
+
+What is charted: {c["jobs"]:,} of the {c["total"]:,} jobs of `sweeps/paper.yaml`
+({_pct(c["jobs"], c["total"])}; P2, the `{load}` closure), whole shards of 486 taken in a fixed
+random order, so the charted share is a random sample of the grid's shards. CPU:
+{c["cpu_h"]:.1f} CPU-hours, {c["cpu_per_job"]:.1f} s a job. The results are kept in
+`{table_path.as_posix()}` ({c["bytes"] / 1e6:.2f} MB); `make chart` continues from it
+(`charted/README.md`).
+
+Commands: `make chart`; `woundsweep generate sweeps/paper.yaml --out RUN`, `woundsweep unpack
+{table_path.as_posix()} RUN`, `woundsweep analyze RUN` (settings in the report below), then
+`python scripts/atlas_page.py RUN`.
+
+## The paper and ours, row by row
+
+{table(c, m, at_ends([run, *beside]), load)}
+
+Figure 3's panels: A and B `training_random.png`, C `importance_random.png`, D `roc_random.png`.
+
+![Figure 2](figures/atlas/max_location_profiles.png)
+
+![Figure 3A-B](figures/atlas/training_random.png)
+![Figure 3C](figures/atlas/importance_random.png)
+![Figure 3D](figures/atlas/roc_random.png)
+
+## The analysis report of the charted grid
+
+{report.strip()}
+"""
+    return text, c
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("run", type=Path, help="the analysed run of the charted table")
+    ap.add_argument("--table", type=Path, default=Path("charted/paper.parquet"))
+    ap.add_argument("--beside", type=Path, action="append", default=[],
+                    help="a run of the same jobs under another closing load (repeatable)")  # fmt: skip
+    ap.add_argument("--out", type=Path, default=Path("docs/atlas.md"))
+    a = ap.parse_args(argv)
+    if not (a.run / "analysis" / "metrics.json").is_file():
+        print(f"atlas_page: {a.run} has no analysis (run `woundsweep analyze`)", file=sys.stderr)
+        return 2
+    text, c = page(a.run, a.table, a.beside)
+    figdir = a.out.parent / "figures" / "atlas"
+    figdir.mkdir(parents=True, exist_ok=True)
+    for name in FIGURES:
+        if (a.run / "analysis" / name).is_file():
+            shutil.copyfile(a.run / "analysis" / name, figdir / name)
+    old = a.out.read_text() if a.out.exists() else ""
+    hand = old[old.index(MARK) :] if MARK in old else f"{MARK}\n"
+    tmp = a.out.with_suffix(".md.tmp")
+    tmp.write_text(text + "\n" + hand)
+    tmp.replace(a.out)
+    print(f"{a.out}: {c['jobs']:,} of {c['total']:,} jobs charted; figures in {figdir}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

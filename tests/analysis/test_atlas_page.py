@@ -1,0 +1,101 @@
+"""scripts/atlas_page.py: docs/atlas.md's side-by-side table holds the charted table's counts
+(checked against the store, not against the script's own arithmetic), Figure 2's share at the
+zone's ends recomputed from the stored line maxima, the hand-written part kept on regeneration,
+the figures copied, and a run without analysis refused in one line."""
+
+from __future__ import annotations
+
+import contextlib
+import importlib.util
+import io
+import re
+from pathlib import Path
+from types import ModuleType
+
+import numpy as np
+import pytest
+from synthetic_store import PREDICT_FAST, PREDICT_SWEEP, depth_stress, write_results, write_store
+
+from woundsweep.cli import main
+
+SCRIPT = Path(__file__).resolve().parents[2] / "scripts" / "atlas_page.py"
+
+
+def _script() -> ModuleType:
+    spec = importlib.util.spec_from_file_location("atlas_page", SCRIPT)
+    assert spec is not None and spec.loader is not None
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+@pytest.fixture(scope="module")
+def charted(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path, object]:
+    root = tmp_path_factory.mktemp("atlas-page")
+    rd = root / "run"
+    rows = write_store(rd, depth_stress, sweep=PREDICT_SWEEP, seed=5, failed_fraction=0.1)
+    # The line maxima along the wound (Figure 2's input): the global maximum's y, which the
+    # synthetic store puts at the zone's ends in stage 2 and anywhere in the others.
+    rows["profile_along_wound_max_at_mm"] = rows["max_location_y_mm"]
+    write_results(rd, rows)
+    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
+        assert main(["analyze", str(rd), *PREDICT_FAST]) == 0
+        assert main(["pack", str(rd), str(root / "table.parquet")]) == 0
+    return rd, root / "table.parquet", rows
+
+
+def _row(text: str, label: str) -> list[str]:
+    line = next(x for x in text.splitlines() if x.startswith(f"| {label}"))
+    return [c.strip() for c in line.strip("|").split("|")]
+
+
+def test_table_counts_match_the_store(charted, tmp_path: Path) -> None:
+    rd, table, rows = charted
+    out = tmp_path / "docs" / "atlas.md"
+    with contextlib.redirect_stdout(io.StringIO()):
+        assert _script().main([str(rd), "--table", str(table), "--out", str(out)]) == 0
+    text = out.read_text()
+    jobs = rows["job_id"].nunique()
+    assert _row(text, "jobs x stages")[2].startswith(f"{jobs:,} x 6 = {len(rows):,}")
+    converged = int((rows["status"] == "converged").sum())
+    assert _row(text, "converged stage results")[2].startswith(f"{converged:,} (")
+    assert converged < len(rows)  # the store has failures, so the count is not trivially all
+    six = rows.groupby("job_id")["status"].agg(lambda s: (s == "converged").all())
+    orient = rows.groupby("job_id")["orientation_deg"].first()
+    for o in sorted(orient.unique()):
+        sel = orient == o
+        assert f"{o:g} deg {int(six[sel].sum())}/{int(sel.sum())}" in text
+
+    # Figure 2: the share of converged stage-2 rows whose along-wound maximum lies within
+    # 0.05 of the line's length of 1/3 or 2/3 (the zone's ends at y_fraction 1/3).
+    s2 = rows[(rows["stage"] == 2) & (rows["status"] == "converged")]
+    L = s2["patch_half_length_mm"].to_numpy(dtype=float)
+    t = (s2["profile_along_wound_max_at_mm"].to_numpy(dtype=float) + L) / (2 * L)
+    near = np.minimum(abs(t - 1 / 3), abs(t - 2 / 3)) <= 0.05
+    cell = _row(text, "Figure 2, along-wound maximum")[2]
+    assert cell.startswith(f"{100 * near.mean():.0f} % of {len(s2):,};")
+    for name in ("training_random.png", "importance_random.png", "roc_random.png"):
+        assert (out.parent / "figures" / "atlas" / name).is_file()
+        assert f"figures/atlas/{name}" in text
+
+
+def test_hand_written_part_is_kept(charted, tmp_path: Path) -> None:
+    rd, table, _ = charted
+    mod = _script()
+    out = tmp_path / "atlas.md"
+    out.write_text(f"old generated text\n{mod.MARK}\nWhy ours differs: a reason.\n")
+    with contextlib.redirect_stdout(io.StringIO()):
+        assert mod.main([str(rd), "--table", str(table), "--out", str(out)]) == 0
+    text = out.read_text()
+    assert "old generated text" not in text
+    assert text.endswith(f"{mod.MARK}\nWhy ours differs: a reason.\n")
+    assert len(re.findall(re.escape(mod.MARK), text)) == 1
+
+
+def test_run_without_analysis_is_refused(tmp_path: Path, capsys) -> None:
+    rd = tmp_path / "bare"
+    rd.mkdir()
+    assert _script().main([str(rd), "--out", str(tmp_path / "a.md")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "has no analysis" in err
+    assert not (tmp_path / "a.md").exists()

@@ -105,10 +105,14 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
+# The study reads the forces and the closure only: the report's other solves are skipped.
+_ONLY_FORCES = ["--no-even", "--no-compare", "--no-band", "--no-scan", "--no-mesh-check"]
+
+
 def _case(out: Path, flags: list[str]) -> dict | None:  # type: ignore[type-arg]
     """``woundsweep case`` into ``out`` (kept: a rerun reads it) and its case.json."""
     if not (out / "case.json").is_file():
-        cmd = [*WS, "case", "--out", str(out), "--no-even", "--no-compare", *flags]
+        cmd = [*WS, "case", "--out", str(out), *_ONLY_FORCES, *flags]
         res = subprocess.run(cmd, capture_output=True, text=True)
         if res.returncode != 0:
             print(f"{out.name}: {res.stderr.strip()}", file=sys.stderr)

@@ -1,4 +1,6 @@
-"""`woundsweep case` on a small wound: the report's files and numbers (fem, about 30 s)."""
+"""`woundsweep case` on a small wound: the report's files and numbers (fem, about a minute on
+two busy cores: the case, the direction scan, the band's ends, the wound along the Langer line,
+the mesh check and two finer meshes)."""
 
 from __future__ import annotations
 
@@ -18,7 +20,7 @@ SMALL = [
 @pytest.mark.fem
 def test_case_writes_its_report(tmp_path: Path) -> None:
     out = tmp_path / "report"
-    res = ws("case", "--out", str(out), *SMALL, "--converge", timeout=300)
+    res = ws("case", "--out", str(out), *SMALL, "--converge", timeout=600)
     assert res.returncode == 0, res.stderr
     for name in ("report.md", "case.json", "forces.png", "wound.png", "view.png"):
         assert (out / name).stat().st_size > 0, name
@@ -27,17 +29,46 @@ def test_case_writes_its_report(tmp_path: Path) -> None:
     forces = data["suture_force_mN"]
     assert data["suture_y_mm"] == pytest.approx([-2.25, 0.0, 2.25])
     assert len(forces) == 3 and all(f > 0 for f in forces)
-    # The load after closure, in four steps, raises the suture forces.
+    # The load after closure, across the wound, in four steps, raises the suture forces.
+    assert data["load"]["to_wound_deg"] == 90.0 and data["load"]["to_langer_deg"] == 65.0
     assert len(data["itch"]) == 4 and all(s is not None for s in data["itch"])
     assert all(a > b for a, b in zip(data["itch"][-1]["suture_force_mN"], forces))
+    # One verdict: the report's bottom line and its load section say the same.
+    verdict = {True: "HOLDS:", False: "DOES NOT HOLD:", None: "UNDECIDED:"}[data["holds"]]
+    report = (out / "report.md").read_text()
+    bottom, load = report.split("## Bottom line")[1], report.split("## Under the load")[1]
+    assert verdict in bottom.split("##")[0] and verdict in load.split("##")[0]
+    # The direction scan, the band's ends (soft and stiff around normal skin), the mesh check.
+    assert [s["to_wound_deg"] for s in data["scan"]] == [0, 45, 90, 135]
+    assert sorted(data["band"]) == ["soft", "stiff"] and data["skin_band"] == ["soft", "stiff"]
+    soft, stiff = (data["band"][k]["suture_force_mN"] for k in ("soft", "stiff"))
+    assert all(a < b < c for a, b, c in zip(soft, forces, stiff))
+    check = data["mesh_check"]
+    assert (
+        check["mesh_size_factor"] == pytest.approx(8 * 0.18) and len(check["relative_change"]) == 3
+    )
     # The same wound along the Langer line.
     assert len(data["along_langer_force_mN"]) == 3
-    report = (out / "report.md").read_text()
-    assert "## Forces per suture" in report and "## When the patient moves" in report
-    assert "## The same wound along the Langer line" in report
+    for head in ("Bottom line", "Forces per suture", "Under the load after closure",
+                 "Against the literature", "The same wound along the Langer line",
+                 "Mesh uncertainty", "Limits of the model", "Model details"):  # fmt: skip
+        assert f"## {head}" in report, head
     # Three meshes, each finer than the last.
     levels = data["mesh_levels"]
     assert [lv["mesh_size_factor"] for lv in levels] == pytest.approx([0.18, 0.405, 0.91125])
     assert levels[0]["dofs"] < levels[1]["dofs"] < levels[2]["dofs"]
-    assert "## Mesh convergence" in report
     assert res.stdout.rstrip().endswith(f"wrote {out / 'report.md'}")
+
+
+@pytest.mark.fem
+def test_case_without_the_optional_solves_says_so(tmp_path: Path) -> None:
+    out = tmp_path / "report"
+    skip = ["--no-even", "--no-compare", "--no-band", "--no-scan", "--no-mesh-check"]
+    res = ws("case", "--out", str(out), *SMALL, "--itch-angle-deg", "90", *skip, timeout=300)
+    assert res.returncode == 0, res.stderr
+    data = json.loads((out / "case.json").read_text())
+    # The load's direction given against the Langer line: 90 to it is 65 to this wound.
+    assert data["load"]["to_langer_deg"] == 90.0 and data["load"]["to_wound_deg"] == 65.0
+    assert data["band"] == {} and len(data["scan"]) == 1 and "mesh_check" not in data
+    report = (out / "report.md").read_text()
+    assert "the mesh check was skipped (`--no-mesh-check`)" in report

@@ -612,6 +612,7 @@ _CASE_BAD = {
     "--bite-depth-mm": ("nan", "0", "3.5", "x"),  # 3.5 mm reaches below the walls
     "--itch-strain": ("nan", "-0.1", "0.6", "x"),
     "--itch-angle-deg": ("nan", "181", "x"),
+    "--itch-to-wound-deg": ("nan", "-181", "x"),
     "--itch-kind": ("twist",),
     "--element": ("3", "0", "x"),
     "--mesh-factor": ("nan", "0", "2.5", "x"),
@@ -637,7 +638,11 @@ def case_cases() -> list[Case]:
         (ws / "f").write_text("")
         return ["case", "--out", "f"]
 
+    def two_directions(ws: Path) -> list[str]:
+        return ["case", "--out", "o", "--itch-to-wound-deg", "45", "--itch-angle-deg", "30"]
+
     cases.append(Case("case-count-and-spacing", both, contains="spacing"))
+    cases.append(Case("case-itch-two-directions", two_directions, contains="not both"))
     cases.append(Case("case-out-is-a-file", out_file, contains="--out"))
     return cases
 

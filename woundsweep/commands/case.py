@@ -2,10 +2,12 @@
 case, a fusiform excision closed by simple interrupted sutures, from flags.
 
 Solves the closure at the given angle to the Langer line, the load after closure ("when my
-patient itches"), a placement that evens the suture forces (by re-solving) and the same wound
-along the Langer line, and writes DIR/report.md, DIR/case.json and figures
-(`woundsweep.studies.case`, `woundsweep.studies.case_report`). Exit status: 0 solved; 2 bad
-input (one line); 3 a solve did not converge; 4 the excision could not be meshed.
+patient itches"; by default across the wound) and the same load along the scan's other
+directions, a placement that evens the suture forces (by re-solving), the site's band of skin
+types, the same wound along the Langer line and the sutures on a mesh with elements half the
+size, and writes DIR/report.md, DIR/case.json and figures (`woundsweep.studies.case`,
+`woundsweep.studies.case_report`). Exit status: 0 solved; 2 bad input (one line); 3 a solve did
+not converge; 4 the excision could not be meshed.
 """
 
 from __future__ import annotations
@@ -17,7 +19,15 @@ from pathlib import Path
 
 import click
 
-from ..config.case import DEPTH_INTO_SUBCUTIS, ELEMENT_DEGREE, MESH_SIZE_FACTOR, SKIN_TYPES
+from ..config.case import (
+    DEPTH_INTO_SUBCUTIS,
+    ELEMENT_DEGREE,
+    MESH_CHECK_FACTOR,
+    MESH_SIZE_FACTOR,
+    SKIN_TYPES,
+    ITCH_TO_WOUND_deg,
+    SCAN_TO_WOUND_deg,
+)
 from ..config.sutures import BODY_SITES, ITCH_KINDS, BITE_WIDTH_mm, ItchLoad
 
 __all__ = ["cmd"]
@@ -89,7 +99,7 @@ def _set_aside_previous(out: Path) -> None:
     type=click.Choice(SKIN_TYPES),
     default="normal",
     show_default=True,
-    help="Skin type (the paper's Table 2).",
+    help="Skin type (the paper's Table 2): the centre of the site's band.",
 )
 @click.option(
     "--sutures",
@@ -115,11 +125,17 @@ def _set_aside_previous(out: Path) -> None:
     help="Load after closure: strain of the patch (0.1 = 10 %).",
 )
 @click.option(
+    "--itch-to-wound-deg",
+    type=float,
+    default=ITCH_TO_WOUND_deg,
+    show_default=True,
+    help="Its direction: angle to the wound's long axis (90 = across the wound).",
+)
+@click.option(
     "--itch-angle-deg",
     type=float,
-    default=_ITCH.angle_to_langer_deg,
-    show_default=True,
-    help="Its direction: angle to the Langer line (90 = across it).",
+    default=None,
+    help="Its direction as an angle to the Langer line instead (90 = across the line).",
 )
 @click.option(
     "--itch-kind",
@@ -144,6 +160,18 @@ def _set_aside_previous(out: Path) -> None:
 )
 @click.option("--no-even", is_flag=True, help="Skip the evened placement.")
 @click.option("--no-compare", is_flag=True, help="Skip the same wound along the Langer line.")
+@click.option("--no-band", is_flag=True, help="Skip the site's other skin types (2 solves).")
+@click.option(
+    "--no-scan",
+    is_flag=True,
+    help=f"Skip the load along {'/'.join(f'{d:g}' for d in SCAN_TO_WOUND_deg)} deg to the wound.",
+)
+@click.option(
+    "--no-mesh-check",
+    is_flag=True,
+    help=f"Skip the sutures on a mesh of {MESH_CHECK_FACTOR:g} x the mesh factor (elements half "
+    "the size).",
+)
 @click.option(
     "--converge",
     is_flag=True,
@@ -152,11 +180,13 @@ def _set_aside_previous(out: Path) -> None:
 def cmd(out: Path, length_mm: float, width_mm: float | None, angle_deg: float, site: str,
         dermis_mm: float | None, subcutis_mm: float | None, depth_mm: float | None, skin: str,
         count: int | None, spacing_mm: float | None, bite_width_mm: float,
-        bite_depth_mm: float | None, itch_strain: float, itch_angle_deg: float, itch_kind: str,
-        element: int, mesh_factor: float, no_even: bool, no_compare: bool,
+        bite_depth_mm: float | None, itch_strain: float, itch_to_wound_deg: float,
+        itch_angle_deg: float | None, itch_kind: str, element: int, mesh_factor: float,
+        no_even: bool, no_compare: bool, no_band: bool, no_scan: bool, no_mesh_check: bool,
         converge: bool) -> None:  # fmt: skip
-    """Solve one clinical case and write its report (forces per suture, where to concentrate
-    stitches, what a load after closure does, the wound along the Langer line)."""
+    """Solve one clinical case and write its report (the bottom line, forces per suture with
+    the site's band, where to place them, what a load after closure does, the forces against
+    the literature, the mesh check)."""
     from ..config.case import ClinicalCase
     from ..config.sutures import CaseError, SuturePlan
     from ..core.fsutil import check_output_dir
@@ -165,10 +195,23 @@ def cmd(out: Path, length_mm: float, width_mm: float | None, angle_deg: float, s
         check_output_dir(out)
     except ValueError as err:
         raise CaseError(f"--out {err}") from None
+    from click.core import ParameterSource
+
+    ctx = click.get_current_context()
+    to_wound: float | None = itch_to_wound_deg
+    if itch_angle_deg is not None:
+        if ctx.get_parameter_source("itch_to_wound_deg") == ParameterSource.COMMANDLINE:
+            raise CaseError("give --itch-to-wound-deg or --itch-angle-deg, not both")
+        to_wound = None
     plan = SuturePlan(count, spacing_mm, bite_width_mm, bite_depth_mm)
+    load = ItchLoad(
+        itch_strain,
+        _ITCH.angle_to_langer_deg if itch_angle_deg is None else itch_angle_deg,
+        itch_kind,
+    )
     case = ClinicalCase(
         length_mm, width_mm, angle_deg, site, dermis_mm, subcutis_mm, depth_mm, skin, plan,
-        ItchLoad(itch_strain, itch_angle_deg, itch_kind), mesh_factor, element,
+        load, mesh_factor, element, to_wound,
     )  # fmt: skip
     logging.getLogger().setLevel(logging.WARNING)
     from ..studies.case import run_case
@@ -177,7 +220,7 @@ def cmd(out: Path, length_mm: float, width_mm: float | None, angle_deg: float, s
     try:
         result = run_case(
             case, echo=lambda s: click.echo(s), compare=not no_compare, even=not no_even,
-            converge=converge,
+            converge=converge, band=not no_band, scan=not no_scan, mesh_check=not no_mesh_check,
         )  # fmt: skip
         command = "woundsweep " + " ".join(shlex.quote(a) for a in sys.argv[1:])
         path = write_report(result, out, command)

@@ -9,7 +9,14 @@ the load after closure and the numerical settings, each default written once her
   force changes by about 3 % from 2.7 l to 5.3 l, docs/validation.md "The fusiform excision").
 - The closure zone (the walls the sutures hold): the whole length, down to the bite depth.
 - The solver's element (`SolverSettings.element_degree`, P2: docs/model.md "Element", P1's
-  closing force keeps falling with refinement) at mesh size factor `MESH_SIZE_FACTOR`.
+  closing force keeps falling with refinement) at mesh size factor `MESH_SIZE_FACTOR`; the
+  mesh check re-solves on a mesh `MESH_CHECK_FACTOR` times finer (element sizes scale with
+  (0.5 / m)^(1/3), `woundsweep.mesh.sizing`: 8 times the factor halves them).
+- The site: its layer thicknesses and the band of skin parameters the forces are given
+  within (`SITES`); the skin type chosen is the band's central value.
+- The load after closure: by default across the wound (`ITCH_TO_WOUND_deg`), whatever the
+  wound's angle to the Langer line; `SCAN_TO_WOUND_deg` the directions of the scan.
+- "Open": a surface gap above `OPEN_GAP_mm`.
 """
 
 from __future__ import annotations
@@ -23,14 +30,72 @@ from .geometry import FINEST_FACTOR, LENGTH_RANGE_MM, GeometrySpec
 from .solver import DEGREES, SolverSettings
 from .sutures import BODY_SITES, CaseError, ItchLoad, SuturePlan
 
-__all__ = ["DEPTH_INTO_SUBCUTIS", "MARGIN_PER_LENGTH", "MESH_SIZE_FACTOR", "ClinicalCase"]
+__all__ = [
+    "DEPTH_INTO_SUBCUTIS",
+    "ITCH_TO_WOUND_deg",
+    "MARGIN_PER_LENGTH",
+    "MESH_CHECK_FACTOR",
+    "MESH_SIZE_FACTOR",
+    "OPEN_GAP_mm",
+    "SCAN_TO_WOUND_deg",
+    "SITES",
+    "ClinicalCase",
+    "Site",
+    "line_angle",
+]
 
 DEPTH_INTO_SUBCUTIS = 0.25
 MARGIN_PER_LENGTH = 2.7
 # The element size 1.41 of the reference away from a trench's floor ((0.5 / 0.18)^(1/3)).
 MESH_SIZE_FACTOR = 0.18
+MESH_CHECK_FACTOR = 8.0
 ELEMENT_DEGREE = SolverSettings.element_degree
 SKIN_TYPES = ("normal", "stiff", "soft")
+# The wound is open where the surface gap is wider than the epidermis is thick (cellular
+# epidermis and stratum corneum 0.08 mm at the shoulder, 0.1 mm at the buttock:
+# Sandby-Moller et al., Acta Derm. Venereol. 2003;83:410): the edges no longer meet.
+OPEN_GAP_mm = 0.1
+ITCH_TO_WOUND_deg = 90.0
+SCAN_TO_WOUND_deg = (0.0, 45.0, 90.0, 135.0)
+
+
+@dataclass(frozen=True)
+class Site:
+    """A body site's preset: layer thicknesses (`BODY_SITES`) with their source, and the band
+    of skin parameters (Table 2's skin types, ``low`` to ``high``) with the reason for it."""
+
+    thickness_source: str
+    band: tuple[str, str]
+    band_source: str
+
+
+_TABLE2_BAND = (
+    "Table 2's soft, normal and stiff skin (Flynn et al.'s facial skin); no Fung parameters "
+    "of this site's dermis are known to the model, so its forces are given between the soft "
+    "and the stiff skin"
+)
+SITES: dict[str, Site] = {
+    "upper-back": Site(
+        "representative values: truncal dermis is among the thickest (Olsen et al., Skin Res. "
+        "Technol. 1995;1:74, 20 MHz ultrasound of 22 sites); subcutis of the interscapular "
+        "region of lean adults of order 5 mm",
+        ("soft", "stiff"),
+        _TABLE2_BAND,
+    ),
+    "forearm": Site(
+        "representative values: extremity skin thinner than truncal skin (Olsen et al. 1995)",
+        ("soft", "stiff"),
+        _TABLE2_BAND,
+    ),
+}
+
+
+def line_angle(deg: float) -> float:
+    """An angle between two lines reduced to (-90, 90] (a line at d is the line at d + 180)."""
+    r = float(deg) % 180.0
+    return r - 180.0 if r > 90.0 else r
+
+
 # The closure zone may reach at most this fraction of the wound's depth (the walls are at
 # least 1 - FLOOR_RISE of it high).
 _ZONE_MAX = 0.95 * (1 - FLOOR_RISE)
@@ -53,6 +118,9 @@ class ClinicalCase:
     itch: ItchLoad = field(default_factory=ItchLoad)
     mesh_size_factor: float = MESH_SIZE_FACTOR
     element_degree: int = ELEMENT_DEGREE
+    # The load's direction as an angle to the wound's long axis (90: across the wound); None:
+    # ``itch.angle_to_langer_deg`` instead.
+    itch_to_wound_deg: float | None = ITCH_TO_WOUND_deg
 
     def __post_init__(self) -> None:
         for name in (
@@ -83,6 +151,11 @@ class ClinicalCase:
         a = self.angle_deg
         if isinstance(a, bool) or not isinstance(a, (int, float)) or not 0 <= a <= 90:
             raise CaseError(f"angle_deg={a!r} must be in [0, 90] degrees to the Langer line")
+        t = self.itch_to_wound_deg
+        if t is not None and (
+            isinstance(t, bool) or not isinstance(t, (int, float)) or not -180 <= t <= 180
+        ):
+            raise CaseError(f"itch_to_wound_deg={t!r} must be in [-180, 180] degrees")
         if self.site not in BODY_SITES:
             raise CaseError(f"site={self.site!r} must be one of {', '.join(BODY_SITES)}")
         if self.skin_type not in SKIN_TYPES:
@@ -128,6 +201,31 @@ class ClinicalCase:
     def depth(self) -> float:
         d = self.depth_mm
         return d if d is not None else self.dermis + DEPTH_INTO_SUBCUTIS * self.subcutis
+
+    @property
+    def load(self) -> ItchLoad:
+        """The load after closure, its direction as an angle to the Langer line."""
+        return self.load_at(self.itch_to_wound_deg)
+
+    def load_at(self, to_wound_deg: float | None) -> ItchLoad:
+        """The case's load along ``to_wound_deg`` to the wound's long axis (None: the given
+        angle to the Langer line). The wound lies at +angle_deg to the Langer line, so a
+        direction at t to it lies at angle_deg + t to the line (modulo 180: a stretch or a
+        shear along n is the one along -n)."""
+        it = self.itch
+        if to_wound_deg is None:
+            return it
+        return ItchLoad(it.strain, line_angle(self.angle_deg + to_wound_deg), it.kind)
+
+    def to_wound_deg(self, load: ItchLoad) -> float:
+        """The angle in [0, 180) from the wound's long axis to ``load``'s direction, turning
+        the way the wound turns from the Langer line (45 and 135 are the two diagonals)."""
+        return (float(load.angle_to_langer_deg) - float(self.angle_deg)) % 180.0
+
+    @property
+    def band(self) -> tuple[str, str]:
+        """The site's band of skin types (its ends; the case's skin type is its centre)."""
+        return SITES[self.site].band
 
     @property
     def orientation_deg(self) -> float:

@@ -1,6 +1,9 @@
 """One clinical case solved (`woundsweep case`): the sutured closure at the case's angle, the
-load after closure, a placement that evens the suture forces (found by re-solving) and the
-same wound along the Langer line (docs/model.md, "Sutures"; docs/design.md, "case").
+load after closure and the same load along the scan's other directions, a placement that
+evens the suture forces (found by re-solving), the site's band of skin types (its ends solved
+again on the same mesh), the same wound along the Langer line and the sutured closure on a
+mesh with elements half the size (docs/model.md, "Sutures"; docs/design.md, "case").
+Each part's solves and wall time are kept (`Cost`) for the report.
 
 Evening the forces: a suture's force is about the closing load of the stretch of wound it
 holds, the part of the wound nearer to it than to its neighbours. From a solve, the load per
@@ -18,9 +21,15 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..config.case import ClinicalCase
+from ..config.case import (
+    MESH_CHECK_FACTOR,
+    ClinicalCase,
+    SCAN_TO_WOUND_deg,
+    line_angle,
+)
 from ..config.geometry import FINEST_FACTOR
 from ..config.solver import SolverSettings
+from ..config.sutures import ItchLoad
 from ..core.errors import SolverError
 from ..core.schema import ExitCode, StageStatus
 from ..physics.materials import JobMaterials
@@ -31,7 +40,11 @@ __all__ = [
     "CONVERGE_RATIO",
     "EVEN_ROUNDS",
     "ITCH_STEPS",
+    "SCAN_STEPS",
+    "BandEnd",
     "CaseResult",
+    "Cost",
+    "LoadRun",
     "MeshLevel",
     "even_positions",
     "run_case",
@@ -39,6 +52,9 @@ __all__ = [
 
 EVEN_ROUNDS = 2
 ITCH_STEPS = 4
+# The direction scan's and the band ends' loads in two steps each (each of the case's four
+# converges in about 3 Newton steps; the end state, not the path, is reported).
+SCAN_STEPS = 2
 # `--converge`: two more meshes, each this much finer (mesh size factor) than the last:
 # element sizes 1.31 times smaller per level.
 CONVERGE_RATIO = 2.25
@@ -51,12 +67,41 @@ class MeshLevel(NamedTuple):
     dofs: int
     suture_force_mN: np.ndarray
     dog_ear_height_mm: float
+    gap_max_mm: float = float("nan")  # the largest surface gap after suturing
 
 
 class CaseNotSolved(SolverError):
     """A solve of the case did not converge (exit 3)."""
 
     exit_code = ExitCode.NOT_CONVERGED
+
+
+class LoadRun(NamedTuple):
+    """The load after closure along one direction, step by step."""
+
+    load: ItchLoad
+    to_wound_deg: float  # [0, 180) from the wound's long axis (`ClinicalCase.to_wound_deg`)
+    steps: list[SolveStep]
+
+    @property
+    def last(self) -> SutureState | None:
+        """The last converged step's state."""
+        return next((s.state for s in reversed(self.steps) if s.state is not None), None)
+
+
+class BandEnd(NamedTuple):
+    """The case solved with another skin type of the site's band."""
+
+    skin_type: str
+    sutured: SutureState
+    loaded: LoadRun | None
+
+
+class Cost(NamedTuple):
+    """The solves of one part of a case and their wall time."""
+
+    solves: int
+    time_s: float
 
 
 class CaseResult(NamedTuple):
@@ -72,6 +117,16 @@ class CaseResult(NamedTuple):
     time_s: float
     levels: list[MeshLevel]  # the mesh convergence check (empty without it)
     surface: SurfacePatch  # the sutured skin surface around the wound
+    band: list[BandEnd] = []  # the band's ends other than the case's skin type
+    scan: list[LoadRun] = []  # the other directions of the load (empty without the scan)
+    mesh_check: MeshLevel | None = None  # h at least halved (None: skipped)
+    costs: dict[str, Cost] = {}
+
+    @property
+    def loaded(self) -> LoadRun:
+        """The case's load after closure."""
+        load = self.case.load
+        return LoadRun(load, self.case.to_wound_deg(load), self.itch)
 
 
 def even_positions(
@@ -101,12 +156,18 @@ def run_case(
     compare: bool = True,
     even: bool = True,
     converge: bool = False,
+    band: bool = True,
+    scan: bool = True,
+    mesh_check: bool = True,
 ) -> CaseResult:
-    """Solve ``case`` (module docstring); with ``converge`` also the sutured closure on two
-    finer meshes (`CONVERGE_RATIO`); CaseNotSolved if a solve does not converge."""
+    """Solve ``case`` (module docstring); with ``band`` also the site's other skin types, with
+    ``scan`` the load along `SCAN_TO_WOUND_deg`, with ``mesh_check`` the sutures on a mesh
+    `MESH_CHECK_FACTOR` times finer, with ``converge`` on two finer meshes
+    (`CONVERGE_RATIO`); CaseNotSolved if a solve does not converge."""
     from ..mesh.build import build_mesh
 
     t0 = time.perf_counter()
+    costs: dict[str, Cost] = {}
     spec = case.geometry()
     echo(f"mesh: {spec.describe()}")
     mesh = build_mesh(spec)
@@ -114,9 +175,9 @@ def run_case(
     sc = SuturedClosure(mesh, spec.lens(), case.zone_depth_fraction, solver)
     echo(f"model: {sc.domain.n_dofs} dofs, P{case.element_degree}")
 
-    def close(angle: float) -> tuple[SutureState, float]:
+    def close(angle: float, skin: str) -> tuple[SutureState, float]:
         orientation = 90.0 - angle
-        steps = sc.close(JobMaterials.table2(case.skin_type, orientation), orientation)
+        steps = sc.close(JobMaterials.table2(skin, orientation), orientation)
         for k, st in enumerate(steps, 1):
             echo(
                 f"  stage {k}: {st.status} ({st.newton_iterations} Newton steps, {st.time_s:.1f} s)"
@@ -137,18 +198,38 @@ def run_case(
             raise CaseNotSolved(f"{what}: {st.status}")
         return st.state
 
+    def load(to_wound: float | None, steps: int) -> LoadRun:
+        it = case.load_at(to_wound)
+        to_w = case.to_wound_deg(it)
+        echo(
+            f"load after closure: {it.kind} {it.strain:g} at {to_w:g} degrees to the wound "
+            f"({abs(line_angle(it.angle_to_langer_deg)):g} to the Langer line)"
+        )
+        done = sc.itch(it, steps)
+        for j, st in enumerate(done, 1):
+            echo(
+                f"  {j}/{steps}: {st.status} ({st.newton_iterations} Newton steps, {st.time_s:.1f} s)"
+            )
+        return LoadRun(it, to_w, done)
+
+    def timed(name: str, solves: int, since: float) -> float:
+        now = time.perf_counter()
+        costs[name] = Cost(solves, now - since)
+        return now
+
     echo(f"closure at {case.angle_deg:g} degrees to the Langer line")
-    closed, closing = close(case.angle_deg)
+    closed, closing = close(case.angle_deg, case.skin_type)
     sutured = suture(None, "sutures")
     surface = sc.surface(case.sutures.bite_width_mm)
-    echo(
-        f"load after closure: {case.itch.kind} {case.itch.strain:g} at {case.itch.angle_to_langer_deg:g} degrees"
-    )
-    itch = sc.itch(case.itch, ITCH_STEPS)
-    for j, st in enumerate(itch, 1):
-        echo(
-            f"  {j}/{ITCH_STEPS}: {st.status} ({st.newton_iterations} Newton steps, {st.time_s:.1f} s)"
-        )
+    itch = load(case.itch_to_wound_deg, ITCH_STEPS).steps
+    t = timed("case", 3 + ITCH_STEPS, t0)
+    scanned: list[LoadRun] = []
+    if scan:
+        main = case.to_wound_deg(case.load)
+        for d in SCAN_TO_WOUND_deg:
+            if abs(line_angle(d - main)) > 1e-6:  # the case's own load is solved already
+                scanned.append(load(d, SCAN_STEPS))
+        t = timed("scan", SCAN_STEPS * len(scanned), t)
     evened: list[SutureState] = []
     if even and len(sutured.suture_y_mm) > 1:
         state = sutured
@@ -163,11 +244,28 @@ def run_case(
                 echo(f"  evened placement {r + 1} stopped: {err}")
                 break
             evened.append(state)
+        t = timed("even", len(evened), t)
+    ends: list[BandEnd] = []
+    for skin in case.band if band else ():
+        if skin == case.skin_type:
+            continue
+        echo(f"{skin} skin (the band's end)")
+        close(case.angle_deg, skin)
+        ends.append(
+            BandEnd(skin, suture(None, "sutures"), load(case.itch_to_wound_deg, SCAN_STEPS))
+        )
+    if ends:
+        t = timed("band", len(ends) * (3 + SCAN_STEPS), t)
     along = along_force = None
     if compare and case.angle_deg != 0:
         echo("the same wound along the Langer line")
-        _, along_force = close(0.0)
+        _, along_force = close(0.0, case.skin_type)
         along = suture(None, "sutures")
+        t = timed("compare", 3, t)
+    check = None
+    if mesh_check:
+        check = _level(case, min(MESH_CHECK_FACTOR * case.mesh_size_factor, FINEST_FACTOR), echo)
+        t = timed("mesh check", 3, t)
     levels = [
         MeshLevel(case.mesh_size_factor, sc.domain.n_dofs, sutured.suture_force_mN,
                   sutured.dog_ear_height_mm)
@@ -177,9 +275,11 @@ def run_case(
         if m > FINEST_FACTOR:
             break
         levels.append(_level(case, m, echo))
+    if converge:
+        timed("converge", 3 * (len(levels) - 1), t)
     return CaseResult(
         case, sc.domain.n_dofs, closing, closed, sutured, itch, evened, along, along_force,
-        time.perf_counter() - t0, levels, surface,
+        time.perf_counter() - t0, levels, surface, ends, scanned, check, costs,
     )  # fmt: skip
 
 
@@ -192,7 +292,7 @@ def _level(case: ClinicalCase, m: float, echo: Callable[[str], None]) -> MeshLev
         build_mesh(spec), spec.lens(), case.zone_depth_fraction,
         SolverSettings(element_degree=case.element_degree),
     )  # fmt: skip
-    echo(f"mesh convergence: m = {m:.4g}, {sc.domain.n_dofs} dofs")
+    echo(f"mesh check: m = {m:.4g}, {sc.domain.n_dofs} dofs")
     steps = sc.close(
         JobMaterials.table2(case.skin_type, case.orientation_deg), case.orientation_deg
     )
@@ -202,7 +302,10 @@ def _level(case: ClinicalCase, m: float, echo: Callable[[str], None]) -> MeshLev
     echo(f"  sutures: {st.status} ({st.newton_iterations} Newton steps, {st.time_s:.1f} s)")
     if st.state is None:
         raise CaseNotSolved(f"m = {m:.4g}: sutures {st.status}")
-    return MeshLevel(m, sc.domain.n_dofs, st.state.suture_force_mN, st.state.dog_ear_height_mm)
+    return MeshLevel(
+        m, sc.domain.n_dofs, st.state.suture_force_mN, st.state.dog_ear_height_mm,
+        float(st.state.gap_mm.max()),
+    )  # fmt: skip
 
 
 def best_evened(result: CaseResult) -> SutureState | None:

@@ -1,5 +1,8 @@
-"""``woundsweep predict MODEL_OR_RUN_DIR --shape ... (all parameters)``: one wound's stress
+"""``woundsweep predict [MODEL_OR_RUN_DIR] --shape ... (all parameters)``: one wound's stress
 estimate with its interval, the paper's stress quantile and the failure probability.
+
+Without a model, the models shipped with woundsweep answer (`analysis.shipped`), and the
+output says what they were trained on.
 
 The orientation is given either as ``--orientation`` (the stiff axis' angle to x, the sweep's
 ``orientation_deg``) or as ``--angle-to-langer`` (the wound's long axis against the Langer
@@ -32,6 +35,7 @@ __all__ = [
     "cmd",
     "parse_params",
     "require_wound_options",
+    "shipped_or_given",
 ]
 
 
@@ -167,6 +171,13 @@ def answer_wound(
         raise DamagedModel(f"{model}: damaged model files ({type(err).__name__})") from None
 
 
+def _shipped_doc(record: dict[str, Any]) -> dict[str, Any]:
+    """--json's account of the shipped models: the line, then their record."""
+    from ..analysis.shipped import describe
+
+    return {"description": describe(record), "trained_on": record}
+
+
 def _span(k: int, q: int, lo: float, hi: float) -> str:
     """A quantile class's stress range; the end classes are open (their outer edge is only the
     smallest / largest training value)."""
@@ -229,8 +240,17 @@ def _basis_lines(basis: dict[str, Any], q: int) -> list[str]:
     return lines
 
 
+def shipped_or_given(model: Path | None, scheme: str | None) -> tuple[Path, dict[str, Any] | None]:
+    """``model``, or the shipped models' directory and their record when it is None."""
+    if model is not None:
+        return model, None
+    from ..analysis import shipped
+
+    return shipped.shipped_model(scheme)
+
+
 @click.command("predict")
-@click.argument("model", type=click.Path(path_type=Path))
+@click.argument("model", type=click.Path(path_type=Path), required=False)
 @click.option(
     "--shape",
     type=click.Choice(["cylindrical", "wedge", "fusiform"]),
@@ -262,7 +282,7 @@ def _basis_lines(basis: dict[str, Any], q: int) -> list[str]:
     help="With --table: write the answers to this .csv or .json file [stdout].",
 )  # fmt: skip
 def cmd(
-    model: Path,
+    model: Path | None,
     shape: str | None,
     skin_type: str | None,
     stages: tuple[int, ...],
@@ -278,7 +298,10 @@ def cmd(
     """Predict a wound's (or a table of wounds') maximal stress with the models from
     `woundsweep analyze`.
 
-    MODEL is a model_<split>.json file or a run directory. Prints, per stage, the stress
+    MODEL is a model_<split>.json file or a run directory. Without it the models shipped
+    with woundsweep answer (`make models` builds them from the charted tables), and the
+    output says what they were trained on (a line after the model's, on stderr with
+    --table; "shipped_model" with --json). Prints, per stage, the stress
     surrogate's estimate (p99 von Mises, kPa) with its conformal interval at --level, the
     paper's quantile class (1 = lowest stresses), its class probabilities and stress range in
     kPa (the end classes are bounded by the smallest / largest training stress); then the
@@ -356,6 +379,7 @@ def cmd(
     require_wound_options(ctx, given)
     assert shape is not None and skin_type is not None  # require_wound_options
     params = parse_params(shape, skin_type, numeric, angle_to_langer)
+    model, record = shipped_or_given(model, scheme)
     loaded = load_model(model, scheme)
     check_model(loaded)  # every field prediction reads, typed: a damaged file is one line
     q, scheme_name = int(loaded.meta["quantiles"]), str(loaded.meta["scheme"])
@@ -381,10 +405,15 @@ def cmd(
             "mesh_size_factor": answer.mesh_size_factor,
             "mesh_size_factor_default": answer.mesh_size_default,
             "basis": answer.basis,
+            "shipped_model": None if record is None else _shipped_doc(record),
         }
         click.echo(json.dumps(doc, indent=1))
         return
     click.echo(f"model: {loaded.path} ({scheme_name} split, {q} quantiles)")
+    if record is not None:
+        from ..analysis.shipped import describe
+
+        click.echo(describe(record))
     for line in _basis_lines(answer.basis, q):
         click.echo(line)
     angle = params["orientation_deg"]

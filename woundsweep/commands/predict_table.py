@@ -1,4 +1,4 @@
-"""``woundsweep predict MODEL --table FILE``: many wounds at once, one a row of a CSV or JSON
+"""``woundsweep predict [MODEL] --table FILE``: many wounds at once, one a row of a CSV or JSON
 file, each checked as one wound's options would be.
 
 Every cell goes through its option's click type (so a row is refused with the text the
@@ -27,6 +27,7 @@ from .predict import (
     answer_wound,
     parse_params,
     require_wound_options,
+    shipped_or_given,
 )
 
 if TYPE_CHECKING:
@@ -306,12 +307,14 @@ def _check_out(out: Path) -> None:
 def _refuse_model_target(loaded: LoadedModel, out: Path) -> None:
     """--out neither among the model's files nor in the store of its run directory."""
     from ..analysis.model_io import FAILURE_STEM, SURROGATE_STEM
+    from ..analysis.shipped import TRAINED_ON
     from ..analysis.trained_on import model_run_dir
     from ..store.paths import refuse_store_target
 
     folder = loaded.path.resolve().parent
     stems = (loaded.path.stem, SURROGATE_STEM, FAILURE_STEM)
-    if out.resolve() in {folder / f"{s}{x}" for s in stems for x in (".json", "_meta.json")}:
+    files = {folder / f"{s}{x}" for s in stems for x in (".json", "_meta.json")}
+    if out.resolve() in files | {folder / TRAINED_ON}:
         raise WoundsweepError(f"--out {out}: one of the model's files (write elsewhere)")
     run_dir = model_run_dir(loaded.path)
     if run_dir is not None:
@@ -330,7 +333,7 @@ def _summary(rows: list[_Row]) -> str:
 
 def predict_table(
     ctx: click.Context,
-    model: Path,
+    model: Path | None,
     table: Path,
     out: Path | None,
     as_json: bool,
@@ -339,9 +342,10 @@ def predict_table(
     level: float,
     allow_extrapolation: bool,
 ) -> None:
-    """Answer every wound of ``table`` (`read_table`) with the model, write the answers
-    (``out``: a .csv or .json file by its suffix; else stdout, CSV or ``as_json``), say on
-    stderr how many were answered; exit status 3 if a row was refused."""
+    """Answer every wound of ``table`` (`read_table`) with the model (None: the shipped
+    models, and a line on stderr of what they were trained on), write the answers (``out``:
+    a .csv or .json file by its suffix; else stdout, CSV or ``as_json``), say on stderr how
+    many were answered; exit status 3 if a row was refused."""
     from ..analysis import load_model
     from ..analysis.model_io import check_model
     from ..analysis.prediction import check_level
@@ -351,11 +355,16 @@ def predict_table(
         _check_out(out)
     check_level(level)
     cells = read_table(table)
+    model, record = shipped_or_given(model, scheme)
     loaded = load_model(model, scheme)
     check_model(loaded)  # every field prediction reads, typed: a damaged file is one line
     if out is not None:
         _refuse_model_target(loaded, out)
     _warn_if_stale(loaded)
+    if record is not None:
+        from ..analysis.shipped import describe
+
+        click.echo(one_line(describe(record)), err=True)
     q = int(loaded.meta["quantiles"])
     default = list(stages) if stages is not None else [int(s) for s in loaded.meta["stages"]]
     rows = [_Row(i, c, default) for i, c in enumerate(cells, start=1)]

@@ -1,0 +1,111 @@
+"""Train the models shipped with woundsweep from charted tables (`make models`).
+
+Makes a run of ``--sweep`` in a work directory, writes the packed ``--table``'s jobs into it
+(`woundsweep unpack`), likewise a run of ``--calibrate-sweep`` from ``--calibrate-on-table``
+if given, runs `woundsweep analyze` on it (``--calibrate-on`` that run; ``--param`` and
+``--split`` passed through), then replaces ``--out`` (default: the package's
+``woundsweep/models/``) whole with the files `predict` reads and ``trained_on.json``
+(`woundsweep.analysis.shipped`). The runs are named after their sweep files and analysed
+from inside the work directory, so the model files name no temporary path.
+
+    python scripts/ship_models.py --table charted/paper.parquet --sweep sweeps/paper.yaml \
+        --calibrate-on-table charted/paper-between-calibration.parquet \
+        --calibrate-sweep sweeps/paper-between-calibration.yaml --param surrogate=gp
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+from woundsweep.analysis.shipped import describe, install, sha256_file, trained_on_record
+from woundsweep.config.manifest import load_run
+from woundsweep.store.packed import read_packed
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _ws(*args: str, cwd: Path) -> None:
+    exe = Path(sys.executable).with_name("woundsweep")
+    subprocess.run([str(exe), *args], check=True, cwd=cwd)
+
+
+def _build_run(table: Path, sweep: Path, work: Path, role: str) -> tuple[str, dict[str, Any]]:
+    """A run of ``sweep`` in ``work`` holding ``table``'s jobs; its name and its table's entry."""
+    name = sweep.stem
+    # One copy is unpacked, counted and hashed: `make chart` may replace the table meanwhile.
+    copy = work / f"{name}.parquet"
+    shutil.copyfile(table, copy)
+    _ws("generate", str(sweep.resolve()), "--out", name, cwd=work)
+    _ws("unpack", copy.name, name, cwd=work)
+    run = load_run(work / name)
+    packed, footer = read_packed(copy)
+    entry = {
+        "role": role,
+        "path": str(table),
+        "sha256": sha256_file(copy),
+        "values_sha256": footer.get("sha256"),
+        "table_jobs": len(set(packed.column("job_id").to_pylist())),
+        "sweep": run.sweep.name,
+        "sweep_file": str(sweep),
+        "sweep_jobs": len(run.manifest),
+    }
+    return name, entry
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--table", type=Path, required=True, help="packed table to train on")
+    ap.add_argument("--sweep", type=Path, required=True, help="the table's sweep file")
+    ap.add_argument("--calibrate-on-table", type=Path, default=None)
+    ap.add_argument("--calibrate-sweep", type=Path, default=None)
+    ap.add_argument("--param", action="append", default=[], help="analyze's --param KEY=VALUE")
+    ap.add_argument("--split", default="both", choices=["random", "geometry", "both"])
+    ap.add_argument("--out", type=Path, default=ROOT / "woundsweep" / "models")
+    ap.add_argument("--work", type=Path, default=None, help="build the runs here (kept)")
+    a = ap.parse_args()
+    if (a.calibrate_on_table is None) != (a.calibrate_sweep is None):
+        ap.error("--calibrate-on-table and --calibrate-sweep go together")
+    for p in (a.table, a.sweep, a.calibrate_on_table, a.calibrate_sweep):
+        if p is not None and not p.is_file():
+            ap.error(f"{p}: no such file")
+    if a.calibrate_sweep is not None and a.calibrate_sweep.stem == a.sweep.stem:
+        ap.error("--sweep and --calibrate-sweep name their runs: give files of different names")
+    t0 = time.monotonic()
+    work = a.work or Path(tempfile.mkdtemp(prefix="ship-models-"))
+    work.mkdir(parents=True, exist_ok=True)
+    try:
+        name, entry = _build_run(a.table, a.sweep, work, "training")
+        tables = [entry]
+        args = [f"--param={p}" for p in a.param] + [f"--split={a.split}"]
+        if a.calibrate_on_table is not None:
+            cal, cal_entry = _build_run(
+                a.calibrate_on_table, a.calibrate_sweep, work, "calibration"
+            )
+            tables.append(cal_entry)
+            args.append(f"--calibrate-on={cal}")
+        _ws("analyze", name, *args, cwd=work)
+        analysis = work / name / "analysis"
+        metrics = json.loads((analysis / "metrics.json").read_text())
+        record = trained_on_record(metrics, entry["sweep"], entry["sweep_jobs"], tables, args)
+        files = install(analysis, record, a.out)
+    finally:
+        if a.work is None:
+            shutil.rmtree(work, ignore_errors=True)
+    print(f"ship_models: {a.out}, {time.monotonic() - t0:.0f} s")
+    for f in files:
+        print(f"  {f.name:28} {f.stat().st_size:>12,} bytes")
+    print(f"  total {sum(f.stat().st_size for f in files):,} bytes")
+    print(describe(record))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -7,7 +7,7 @@ WS      := $(VENV)/bin/woundsweep
 DEMO_DIR ?= runs/demo
 PYTEST_ARGS ?=
 
-.PHONY: setup test-deps test test-fast test-dolfinx-latest verify demo chart bench bench-convergence lint format clean
+.PHONY: setup test-deps test test-fast test-dolfinx-latest verify demo chart models bench bench-convergence bench-scale lint format clean
 
 setup:
 	@bash scripts/setup.sh
@@ -60,6 +60,19 @@ CHART_HOURS ?= 1
 chart: setup
 	$(PY) scripts/chart.py --sweep $(CHART_SWEEP) --table $(CHART_TABLE) --run $(CHART_RUN) --hours $(CHART_HOURS)
 
+# The models shipped with woundsweep (woundsweep/models/, what `predict` answers with when no
+# model is given): analyze on the charted table, the intervals calibrated on the off-grid
+# table (MODELS_CAL_TABLE= skips it), MODELS_ARGS passed on (e.g. --param surrogate=gp).
+MODELS_TABLE ?= charted/paper.parquet
+MODELS_SWEEP ?= sweeps/paper.yaml
+MODELS_CAL_TABLE ?= charted/paper-between-calibration.parquet
+MODELS_CAL_SWEEP ?= sweeps/paper-between-calibration.yaml
+MODELS_ARGS ?=
+models: setup
+	$(PY) scripts/ship_models.py --table $(MODELS_TABLE) --sweep $(MODELS_SWEEP) \
+	    $(if $(MODELS_CAL_TABLE),--calibrate-on-table $(MODELS_CAL_TABLE) --calibrate-sweep $(MODELS_CAL_SWEEP)) \
+	    $(MODELS_ARGS)
+
 bench: setup
 	@for b in benchmarks/bench_*.py; do echo "== $$b"; $(PY) $$b || exit 1; done
 
@@ -68,6 +81,13 @@ bench: setup
 bench-convergence: setup
 	$(WS) generate sweeps/paper.yaml --out runs/paper
 	$(PY) benchmarks/convergence.py runs/paper --workers 2
+
+# status, analyze, atlas and export timed on the paper grid filled with 11,664 synthetic
+# results (not part of bench: about 30 minutes on two cores); SCALE_ARGS=--jobs 500 is a
+# quick check on a sub-grid.
+SCALE_ARGS ?=
+bench-scale: setup
+	$(PY) benchmarks/scale.py $(SCALE_ARGS)
 
 lint: setup
 	$(VENV)/bin/ruff check woundsweep tests benchmarks

@@ -31,12 +31,15 @@ def test_status_names_the_element_of_the_stored_rows(empty_run: Path, capsys) ->
     from store_files import store_converged
 
     assert main(["status", str(empty_run), "--json"]) == 0
-    data = json.loads(capsys.readouterr().out)
+    out, err = capsys.readouterr()
+    data = json.loads(out)
     assert data["element_degree"] is None and data["element"] is None  # nothing stored
+    # The time it took: in the document with --json (stderr stays silent), else on stderr.
+    assert err == "" and data["read_time_s"] >= 0
     assert main(["status", str(empty_run)]) == 0
-    assert capsys.readouterr().out.splitlines()[0] == (
-        "sweep demo: element n/a (no stored results)"
-    )
+    out, err = capsys.readouterr()
+    assert out.splitlines()[0] == "sweep demo: element n/a (no stored results)"
+    assert re.fullmatch(r"status: 32 jobs \(0 stored\) read in \d+\.\d s\n", err), err
     store_converged(empty_run, 0)
     assert main(["status", str(empty_run)]) == 0
     assert (

@@ -40,7 +40,12 @@ def _index_data(out: Path) -> dict:
 def test_index_holds_every_job_with_the_store_values(run: Path, tmp_path: Path, capsys) -> None:
     out = tmp_path / "site"
     assert main(["atlas", str(run), "--out", str(out)]) == 0
-    text = capsys.readouterr().out
+    text, err = capsys.readouterr()
+    assert re.fullmatch(
+        r"atlas: 6 jobs in \d+\.\d s \(reading the store \d+\.\d s, pages \d+\.\d s;"
+        r" index \d+\.\d MB\)",
+        err.splitlines()[-1],
+    ), err
     assert (
         "atlas of 6 jobs (3 stored), 3D views for 2 (1 chosen jobs have no stored fields)" in text
     )
@@ -53,6 +58,9 @@ def test_index_holds_every_job_with_the_store_values(run: Path, tmp_path: Path, 
     for (j, k), v in res.set_index(["job_index", "stage"])["p99_von_mises_kPa"].items():
         got = rows[j][f"p99_s{k}"]
         assert (got is None) if v != v else got == pytest.approx(v, rel=1e-5)
+    # The page draws the rows a page at a time, with navigation above and below the table.
+    html = (out / "index.html").read_text()
+    assert 'id="pager"' in html and 'id="pager-bottom"' in html and "a page at a" in html
     classes = [rows[j]["failure_class"] for j in range(6)]
     assert classes == ["converged", "not-converged", "converged"] + ["pending"] * 3
     assert rows[1]["failed_stage"] == 4 and rows[1]["p99_s3"] is not None

@@ -215,7 +215,7 @@ def test_atlas_index_lists_sorts_filters(driver, site, tmp_path: Path) -> None:
         "return Array.from(document.querySelectorAll('#index tbody tr')).map(r => Number(r.dataset.job));"
     )
     assert rows() == [0, 1, 2, 3, 4, 5]
-    assert driver.find_element("id", "count").text == "6 of 6 jobs"
+    assert driver.find_element("id", "count").text == "rows 1-6 of 6"
     classes = driver.execute_script(
         "var c=[...document.querySelectorAll('#index thead tr:first-child th')].findIndex(t => t.dataset.col==='failure_class');"
         "return [...document.querySelectorAll('#index tbody tr')].map(r => r.children[c].textContent);"

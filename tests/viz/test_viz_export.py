@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import shutil
 import xml.etree.ElementTree as ET
 from pathlib import Path
@@ -207,7 +208,8 @@ def test_stages_not_kept_are_named(store: Path, tmp_path: Path, capsys) -> None:
 def test_export_all_counts(store: Path, tmp_path: Path, capsys) -> None:
     out = tmp_path / "all"
     assert main(["export", str(store), "--all", "--out", str(out)]) == 0
-    text = capsys.readouterr().out
+    text, err = capsys.readouterr()
+    assert re.fullmatch(r"export: 3 jobs \(7 stages\) in \d+\.\d s", err.splitlines()[-1]), err
     assert "exported 3 jobs (7 stages)" in text
     assert "3 jobs of the manifest have no stored result yet" in text
     assert "2 stages not exported: not kept by `run --fields final`" in text
@@ -218,7 +220,8 @@ def test_export_all_counts(store: Path, tmp_path: Path, capsys) -> None:
 def test_job_without_fields_gets_its_mesh(store: Path, tmp_path: Path, capsys) -> None:
     out = tmp_path / "none"
     assert main(["export", str(store), "--job", "2", "--out", str(out)]) == 0
-    text = capsys.readouterr().out
+    text, err = capsys.readouterr()
+    assert re.fullmatch(r"export: job 2 in \d+\.\d s", err.splitlines()[-1]), err
     assert "stages none" in text and "stage 6 not kept by `run --fields none`" in text
     assert list(ET.parse(out / "job-2" / "job-2.pvd").getroot().iter("DataSet")) == []
     run = load_run(store)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 from typing import Any
 
@@ -156,7 +157,9 @@ def cmd(
     --param, then the dedicated flags (the stress surrogate: --param surrogate=trees|gp).
     --calibrate-on and --test-on take runs of wounds between the grid's values; their rows
     must have the same stress columns, element degree, skin types, shapes and stages.
+    The time it took is the last line, on stderr.
     """
+    t0 = time.perf_counter()
     from tqdm import tqdm
 
     from ..analysis import SCHEMES, run_analysis
@@ -204,3 +207,10 @@ def cmd(
     for line in summary_lines(result.metrics):
         click.echo(line)
     click.echo(f"wrote {len(result.files)} files to {result.out_dir} (see report.md)")
+    rows = result.metrics["rows"]
+    click.echo(
+        f"analyze: {rows['used_rows']:,} of {rows['store_rows']:,} rows used,"
+        f" {len(schemes)} split{'s' if len(schemes) > 1 else ''}, in"
+        f" {time.perf_counter() - t0:.1f} s",
+        err=True,
+    )

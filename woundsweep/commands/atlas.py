@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -85,8 +86,9 @@ def cmd(run_dir: Path, out: Path | None, views: str) -> None:
     One copy of plotly.js (about 4.8 MB) serves every 3D view; a view costs about
     24 + 13 x (stored stages) bytes per exterior triangle of the job's mesh (about 130 kB for
     a demo job). The projected size of the chosen views is shown while it builds and the
-    sizes are printed at the end.
+    sizes are printed at the end, and the time it took on stderr.
     """
+    t0 = time.perf_counter()
     from ..config.manifest import load_run
     from ..core.errors import WoundsweepError
     from ..core.fsutil import check_output_dir
@@ -104,6 +106,7 @@ def cmd(run_dir: Path, out: Path | None, views: str) -> None:
     n_files = len(result_files(run.run_dir)[0])
     click.echo(f"reading and validating {n_files} result files ...", err=True)
     results = read_results(run.run_dir, run=run)
+    read_s = time.perf_counter() - t0
     _warn_if_stale(run, results[results["job_id"].isin(set(run.manifest["job_id"]))])
     stored = set(int(j) for j in results["job_index"].unique())
     has_fields = results["fields_file"].fillna("").astype(str) != ""
@@ -139,3 +142,8 @@ def cmd(run_dir: Path, out: Path | None, views: str) -> None:
         f"plotly.js {_mb(s.plotly_bytes)} once"
     )
     click.echo(f"index: {s.index}")
+    click.echo(
+        f"atlas: {s.jobs:,} jobs in {time.perf_counter() - t0:.1f} s (reading the store"
+        f" {read_s:.1f} s, pages {s.seconds:.1f} s; index {_mb(s.index.stat().st_size)})",
+        err=True,
+    )

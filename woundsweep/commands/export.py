@@ -3,6 +3,7 @@ files per job (`woundsweep.viz.export`)."""
 
 from __future__ import annotations
 
+import time
 from collections import Counter
 from pathlib import Path
 from typing import Any
@@ -49,8 +50,10 @@ def cmd(
     job-<N>.json says how each array was computed. With --xdmf the .h5 lies beside the
     .xdmf in DIR/job-<N>/. Which stages exist is decided by `run --fields`; a stage without a
     field is named with the reason. A job without a stored result is read from
-    RUN_DIR/solve/job_<N>.h5 when `woundsweep solve` wrote it.
+    RUN_DIR/solve/job_<N>.h5 when `woundsweep solve` wrote it. The time it took is the last
+    line, on stderr.
     """
+    t0 = time.perf_counter()
     from ..config.manifest import load_run
     from ..core.errors import WoundsweepError
     from ..core.fsutil import check_output_dir
@@ -76,6 +79,7 @@ def cmd(
         click.echo(f"job {job}: stages {stages or 'none'} -> {where}")
         if _notes_line(info):
             click.echo(f"job {job}: not exported: {_notes_line(info)}")
+        click.echo(f"export: job {job} in {time.perf_counter() - t0:.1f} s", err=True)
         return
     results = read_results(run.run_dir, run=run)
     man = run.manifest[run.manifest["job_id"].isin(set(results["job_id"]))]
@@ -94,3 +98,7 @@ def cmd(
         click.echo(f"{pending} jobs of the manifest have no stored result yet")
     for reason, count in sorted(reasons.items()):
         click.echo(f"  {count} stages not exported: {reason}")
+    click.echo(
+        f"export: {len(man):,} jobs ({n_stages:,} stages) in {time.perf_counter() - t0:.1f} s",
+        err=True,
+    )

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import time
 from pathlib import Path
 from typing import Any
 
@@ -93,17 +94,28 @@ def cmd(run_dir: Path, as_json: bool) -> None:
 
     Every result file is validated, with the checksums of its fields and mesh files; stale
     results (computed with other settings) and damaged ones count as pending (rerun
-    `woundsweep run`: it recomputes them, moving damaged files to RUN_DIR/corrupt/).
+    `woundsweep run`: it recomputes them, moving damaged files to RUN_DIR/corrupt/). The
+    time it took ends the table as a line on stderr (with --json: the key read_time_s).
     """
+    t0 = time.perf_counter()
     run = load_run(run_dir)
     scan = scan_store(run.run_dir, run=run)
     rows = scan_results(scan)
     s = summarize(run.manifest, rows, scan)
     degree = rows_element_degree(rows)  # the stored results' element (None: none stored)
     name = element_name(degree) if degree is not None else None
+    seconds = time.perf_counter() - t0
     if as_json:
+        # In the document, not on stderr: a script reading --json gets stdout alone and a
+        # silent stderr means success.
         element = {"element_degree": degree, "element": name}
-        click.echo(json.dumps({"run_dir": str(run.run_dir), **element, **s}, indent=2))
+        doc = {"run_dir": str(run.run_dir), **element, **s, "read_time_s": round(seconds, 3)}
+        click.echo(json.dumps(doc, indent=2))
     else:
         click.echo(f"sweep {run.sweep.name}: element {name or 'n/a (no stored results)'}")
         click.echo(format_status(s))
+        click.echo(
+            f"status: {len(run.manifest):,} jobs ({s['jobs_done']:,} stored) read in"
+            f" {seconds:.1f} s",
+            err=True,
+        )

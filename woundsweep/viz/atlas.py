@@ -3,8 +3,8 @@
 Layout of ``OUT/``::
 
     index.html             every job of the manifest: parameters, failure class, failed and
-                           converged stages, p99 per stage
-                           (sortable, filterable, paged by assets/index.js)
+                           converged stages, p99 per stage (inline JSON; sorted, filtered
+                           and drawn a page of 50-1,000 rows at a time by assets/index.js)
     jobs/job-<index>.html  per job: stage table, parameters, its log (the last LOG_BYTES) and,
                            for the jobs chosen by ``views``, its 3D view
     analysis/index.html    RUN_DIR/analysis/'s report and figures, when they exist
@@ -36,7 +36,7 @@ from ..core.fsutil import read_tail
 from ..core.layout import ANALYSIS_METRICS
 from ..core.schema import STAGES, StageStatus
 from ..store.reader import rows_element_degree
-from .html import asset, fmt, json_script, page, plotly_js
+from .html import asset, json_script, page, plotly_js
 from .jobdata import load_job
 from .view import job_body
 
@@ -311,7 +311,7 @@ def build_atlas(
     data = _index_table(run.manifest, results, drawn)
     body = (
         f"<h1>woundsweep atlas <small>{escape(run.run_dir.name)} &middot; "
-        f"{len(order)} jobs"
+        f"{len(order):,} jobs"
         + (f" &middot; element {escape(element)}" if element else "")
         + "</small></h1>\n"
         + (
@@ -320,13 +320,15 @@ def build_atlas(
             else ""
         )
         + '<p class="legend">Click a header to sort; type in the boxes to filter (text: substring; '
-        "numbers: 2, &gt;1, &lt;=0.5 or 1..2). Units are in the column names; "
+        "numbers: 2, &gt;1, &lt;=0.5 or 1..2; - for missing); the rows are shown a page at a "
+        "time. Units are in the column names; "
         "&ldquo;p99 kPa s<i>k</i>&rdquo; is stage <i>k</i>&rsquo;s p99_von_mises_kPa, the p99 of "
         "the volume (the volume-weighted 99th percentile of von Mises). "
         f"Built {escape(time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime()))} from {escape(str(run.run_dir))}; "
-        f"{fmt(len(results.drop_duplicates('job_index')))} jobs stored.</p>\n"
+        f"{results['job_index'].nunique():,} jobs stored.</p>\n"
         '<div class="pager" id="pager"></div>\n'
         '<div class="tablewrap"><table id="index"></table></div>\n'
+        '<div class="pager" id="pager-bottom"></div>\n'
         + json_script("atlasdata", data)
         + '<script src="assets/index.js"></script>\n'
     )

@@ -9,9 +9,9 @@ import pandas as pd
 import pyarrow.parquet as pq
 import pytest
 import yaml
+from store_files import store_converged
+from synthetic_store import SMALL_SWEEP, write_store
 
-from tests.support.store_files import store_converged
-from tests.support.synthetic_store import SMALL_SWEEP, write_store
 from woundsweep.cli import main
 from woundsweep.commands.generate import generate
 from woundsweep.config.manifest import load_run

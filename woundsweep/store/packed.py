@@ -183,17 +183,9 @@ def pack(run_dir: str | Path, path: str | Path) -> PackCounts:
     path = Path(path)
     run = load_run(run_dir)
     scan = scan_store(run.run_dir, run=run, verify_files=False)
-    done = [
-        c.meta["_table"]
-        for c in scan.checks.values()
-        if c.state == ResultState.DONE and c.meta is not None
-    ]
     schema = result_schema()
-    new = (
-        _strip_fields(pa.concat_tables([t.replace_schema_metadata(None) for t in done]))
-        if done
-        else schema.empty_table()
-    )
+    done = scan.rows if scan.rows is not None else schema.empty_table()  # the done rows
+    new = _strip_fields(done) if done.num_rows else schema.empty_table()
     old = read_packed(path)[0] if path.exists() else schema.empty_table()
     old_keys, new_keys = _job_keys(old), _job_keys(new)
     taken = {j for j, k in new_keys.items() if old_keys.get(j) != k}

@@ -16,9 +16,10 @@ from __future__ import annotations
 
 import hashlib
 import json
+import os
 from collections.abc import Iterable, Mapping
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import pandas as pd
 import pyarrow as pa
@@ -33,6 +34,9 @@ from ..core.schema import ResultState, stage_field_kinds
 from ..core.versions import RESULT_FORMAT_VERSION
 from .identity import file_sha256, fingerprints
 
+if TYPE_CHECKING:
+    from .readcache import ReadCache
+
 __all__ = [
     "DIAGNOSTIC_FIELDS",
     "META_KEY",
@@ -44,8 +48,10 @@ __all__ = [
     "ResultCheck",
     "StoreScan",
     "check_files",
+    "cache_key",
     "check_result",
     "content_digest",
+    "read_checked",
     "read_footer",
     "read_results",
     "result_files",
@@ -100,9 +106,27 @@ class FilesDamaged(StoreError):
 
 
 def content_digest(table: pa.Table) -> str:
-    """sha256 of the table's values (canonical JSON), kept in the footer record."""
-    text = json.dumps(table.to_pylist(), sort_keys=True, default=str)
-    return hashlib.sha256(text.encode()).hexdigest()
+    """sha256 of the table's values (canonical JSON of the rows, keys sorted), kept in the
+    footer record."""
+    # Rows built column by column with their keys already in order: the same text as
+    # ``json.dumps(table.to_pylist(), sort_keys=True)`` at a fraction of its cost.
+    names = sorted(table.column_names)
+    columns = [_json_values(table.column(n)) for n in names]
+    rows = [dict(zip(names, values)) for values in zip(*columns)]
+    return hashlib.sha256(json.dumps(rows, default=str).encode()).hexdigest()
+
+
+def _json_values(col: pa.ChunkedArray) -> list[Any]:
+    """The column's values for `content_digest`: timestamps as ``str`` of their datetime
+    (what ``default=str`` makes of them), each distinct one converted once (slow in Python)."""
+    if not pa.types.is_timestamp(col.type):
+        return col.to_pylist()
+    distinct = col.unique()
+    text = {
+        i: None if d is None else str(d)
+        for i, d in zip(distinct.cast(pa.int64()).to_pylist(), distinct.to_pylist())
+    }
+    return [text[i] for i in col.cast(pa.int64()).to_pylist()]
 
 
 def result_schema() -> pa.Schema:
@@ -126,6 +150,9 @@ def result_schema() -> pa.Schema:
     fields += [pa.field(k, t) for k, t in DIAGNOSTIC_FIELDS.items()]
     fields += [pa.field(k, t) for k, t in _JOB_FIELDS.items()]
     return pa.schema(fields)
+
+
+_SCHEMA = result_schema()
 
 
 def read_parquet_file(path: str | Path, **kwargs: Any) -> pa.Table:
@@ -173,6 +200,72 @@ def stale_reason(meta: Mapping[str, Any], fingerprint: str | None = None) -> str
     return ""
 
 
+def read_checked(
+    path: Path, job_id: str | None, *, skip_stale: bool = True
+) -> tuple[dict[str, Any], pa.Table | None, tuple[int, ...]]:
+    """Open a result file once and check it: its footer record, its table (None when the
+    footer names another result format and ``skip_stale``: stale, its rows not read) and
+    its `cache_key`.
+
+    Page checksums, schema, footer record, content checksum, job id, stages and file names
+    are checked on the bytes read; a failure is a `StoreError` naming the file as corrupt.
+    """
+    if not path.is_file():  # a named pipe would block the reader
+        raise StoreError(f"{path}: corrupt result file (not a regular file)")
+    try:
+        # Opened by Python, not by path (see read_parquet_file); the footer is parsed once.
+        with open(path, "rb") as fh:
+            key = cache_key(os.fstat(fh.fileno()))  # of the very file whose bytes are read
+            data = fh.read()  # one read: a small file parsed from memory reads faster
+        with pq.ParquetFile(pa.BufferReader(data), page_checksum_verification=True) as pf:
+            meta = _footer_record(pf.schema_arrow.metadata)
+            if skip_stale and meta is not None and stale_reason(meta):
+                return meta, None, key  # another result format: stale, not read further
+            table = pf.read(use_threads=False)  # threads cost more than a few rows take
+    except Exception as err:  # pyarrow raises OSError, ArrowInvalid, ... for damaged files
+        raise StoreError(f"{path}: corrupt result file ({type(err).__name__})") from None
+    if not table.schema.remove_metadata().equals(_SCHEMA):
+        raise StoreError(f"{path}: corrupt result file (columns differ from the result schema)")
+    try:
+        lo, hi = (int(s) for s in meta["stages"])  # type: ignore[index]
+        if not isinstance(meta.get("sha256"), str):  # type: ignore[union-attr]
+            raise TypeError
+    except (TypeError, ValueError, KeyError, AttributeError):
+        raise StoreError(
+            f"{path}: corrupt result file (no valid woundsweep footer record)"
+        ) from None
+    assert meta is not None  # for mypy: a None record raised TypeError above
+    if meta["sha256"] != content_digest(table):
+        raise StoreError(f"{path}: corrupt result file (content checksum mismatch)")
+    if job_id is not None and meta.get("job_id") != job_id:
+        raise StoreError(f"{path}: holds job {meta.get('job_id')!r}, not {job_id!r}")
+    found = table.column("stage").to_pylist()
+    if found != list(range(lo, hi + 1)):
+        raise StoreError(f"{path}: expected stages {lo}-{hi}, found {found}")
+    try:
+        names = store_file_names(meta, meta.get("job_id"))
+    except StoreError as err:
+        raise StoreError(f"{path}: corrupt result file ({err})") from None
+    for key_name, name in zip(("fields_file", "mesh_file"), names):
+        if set(table.column(key_name).to_pylist()) - {name}:
+            raise StoreError(f"{path}: corrupt result file ({key_name} differs from its footer's)")
+    return meta, table.replace_schema_metadata(None), key
+
+
+def cache_key(st: os.stat_result) -> tuple[int, ...]:
+    """What identifies a result file's bytes to the read cache: size, mtime_ns, ctime_ns
+    and inode (a write through the filesystem changes one of them)."""
+    return (st.st_size, st.st_mtime_ns, st.st_ctime_ns, st.st_ino)
+
+
+def _footer_record(metadata: Mapping[bytes, bytes] | None) -> dict[str, Any] | None:
+    try:
+        meta = json.loads((metadata or {})[META_KEY])
+    except (KeyError, TypeError, ValueError):
+        return None
+    return meta if isinstance(meta, dict) else None
+
+
 def validate_result_file(
     path: Path,
     job_id: str | None,
@@ -187,38 +280,8 @@ def validate_result_file(
     file is missing, has another size, or (``verify_files``) another sha256 than recorded.
     The record's ``_table`` holds the file's table.
     """
-    if not path.is_file():  # a named pipe would block the reader
-        raise StoreError(f"{path}: corrupt result file (not a regular file)")
-    try:
-        table = read_parquet_file(path, page_checksum_verification=True)
-    except Exception as err:  # pyarrow raises OSError, ArrowInvalid, ... for damaged files
-        raise StoreError(f"{path}: corrupt result file ({type(err).__name__})") from None
-    if not table.schema.remove_metadata().equals(result_schema()):
-        raise StoreError(f"{path}: corrupt result file (columns differ from the result schema)")
-    raw = (table.schema.metadata or {}).get(META_KEY)
-    try:
-        meta = json.loads(raw)  # type: ignore[arg-type]  # None raises TypeError: caught below
-        lo, hi = (int(s) for s in meta["stages"])
-        if not isinstance(meta.get("sha256"), str):
-            raise TypeError
-    except (TypeError, ValueError, KeyError, AttributeError):
-        raise StoreError(
-            f"{path}: corrupt result file (no valid woundsweep footer record)"
-        ) from None
-    if meta["sha256"] != content_digest(table):
-        raise StoreError(f"{path}: corrupt result file (content checksum mismatch)")
-    if job_id is not None and meta.get("job_id") != job_id:
-        raise StoreError(f"{path}: holds job {meta.get('job_id')!r}, not {job_id!r}")
-    found = table.column("stage").to_pylist()
-    if found != list(range(lo, hi + 1)):
-        raise StoreError(f"{path}: expected stages {lo}-{hi}, found {found}")
-    try:
-        names = store_file_names(meta, meta.get("job_id"))
-    except StoreError as err:
-        raise StoreError(f"{path}: corrupt result file ({err})") from None
-    for key, name in zip(("fields_file", "mesh_file"), names):
-        if set(table.column(key).to_pylist()) - {name}:
-            raise StoreError(f"{path}: corrupt result file ({key} differs from its footer's)")
+    meta, table, _ = read_checked(path, job_id, skip_stale=False)
+    assert table is not None  # for mypy: read whatever its format
     check_files(path, meta, run_dir, verify=verify_files, memo=memo)
     meta["_table"] = table
     return meta
@@ -261,18 +324,22 @@ def check_result(
     *,
     verify_files: bool = True,
     memo: dict | None = None,
+    cache: ReadCache | None = None,
 ) -> ResultCheck:
     """Sort one result file: corrupt (the Parquet file), stale (another result format or
-    another fingerprint than ``fingerprint``), damaged (its fields or mesh file), or done."""
-    footer = read_footer(path) if path.is_file() else None
-    if footer is not None and (reason := stale_reason(footer)):
-        return ResultCheck(ResultState.STALE, reason)
+    another fingerprint than ``fingerprint``), damaged (its fields or mesh file), or done.
+    A done result's record holds its rows as ``_table``; ``cache`` is the read cache to
+    take the Parquet file's checked rows from (`readcache`), if any."""
     try:
-        meta = validate_result_file(path, job_id, run_dir, verify_files=False)
-    except FilesDamaged as err:  # the Parquet file is whole: its fields or mesh file is not
-        return ResultCheck(ResultState.DAMAGED, str(err), read_footer(path))
+        meta, table = cache.read(job_id, path) if cache else read_checked(path, job_id)[:2]
     except StoreError as err:
         return ResultCheck(ResultState.CORRUPT, str(err))
+    if table is None:  # another result format: its rows were not read
+        return ResultCheck(ResultState.STALE, stale_reason(meta))
+    try:  # the Parquet file is whole: are its fields and mesh files?
+        check_files(path, meta, run_dir, verify=False)
+    except FilesDamaged as err:
+        return ResultCheck(ResultState.DAMAGED, str(err), meta)
     if reason := stale_reason(meta, fingerprint):
         return ResultCheck(ResultState.STALE, reason, meta)
     if verify_files:
@@ -280,6 +347,7 @@ def check_result(
             check_files(path, meta, run_dir, verify=True, memo=memo)
         except FilesDamaged as err:
             return ResultCheck(ResultState.DAMAGED, str(err), meta)
+    meta["_table"] = table
     return ResultCheck(ResultState.DONE, "", meta)
 
 
@@ -299,40 +367,52 @@ def result_files(run_dir: Path) -> tuple[dict[str, Path], list[Path]]:
 
 
 class StoreScan(NamedTuple):
-    """What `scan_store` found: checks of manifest jobs, orphans, stray files."""
+    """What `scan_store` found: checks of manifest jobs, orphans, stray files, and the rows
+    of the done results in job order (their checks' records hold no ``_table``)."""
 
     checks: dict[str, ResultCheck]
     orphans: list[str]
     stray: list[Path]
+    rows: pa.Table | None = None
 
     def count(self, state: ResultState) -> int:
         return sum(c.state == state for c in self.checks.values())
 
 
 def scan_store(
-    run_dir: str | Path, *, verify_files: bool = True, run: Run | None = None
+    run_dir: str | Path,
+    *,
+    verify_files: bool = True,
+    run: Run | None = None,
+    use_cache: bool = True,
 ) -> StoreScan:
     """Check every result file of the run's manifest jobs (checksums of the fields and mesh
     files too, unless ``verify_files`` is false); moves nothing. ``run`` is the run directory
-    already loaded (`load_run`), if the caller has it."""
+    already loaded (`load_run`), if the caller has it. With ``use_cache`` the Parquet files
+    unchanged since the read cache recorded them are taken from it; without, every one is read
+    and checked (and the cache written anew)."""
+    from .readcache import ReadCache, Rows
+
     rd = Path(run_dir)
     run = run if run is not None else load_run(rd)
     expected = fingerprints(run.sweep, run.manifest)
     files, stray = result_files(rd)
     memo: dict = {}
-    checks = {
-        jid: check_result(p, jid, rd, expected[jid], verify_files=verify_files, memo=memo)
-        for jid, p in files.items()
-        if jid in expected
-    }
+    cache = ReadCache(rd, trust=use_cache)
+    rows = Rows()
+    checks = {}
+    for jid, p in files.items():
+        if jid not in expected:
+            continue
+        c = check_result(
+            p, jid, rd, expected[jid], verify_files=verify_files, memo=memo, cache=cache
+        )
+        if c.meta is not None and "_table" in c.meta:
+            rows.append(c.meta.pop("_table"))  # joined as read: no table per file kept
+        checks[jid] = c
+    cache.save()
     orphans = [jid for jid in files if jid not in expected]
-    return StoreScan(checks, orphans, stray)
-
-
-def _frame(tables: list[pa.Table]) -> pd.DataFrame:
-    if not tables:
-        return result_schema().empty_table().to_pandas()
-    return pa.concat_tables([t.replace_schema_metadata(None) for t in tables]).to_pandas()
+    return StoreScan(checks, orphans, stray, rows.table())
 
 
 def read_results(
@@ -345,8 +425,11 @@ def read_results(
     computed with other settings (stale) are left out; so are stray files in ``results/``.
     Jobs not in the manifest (orphans of an earlier sweep) are returned: callers filter them.
     ``run`` is the run directory already loaded (`load_run`), if the caller has it; without
-    it the directory's sweep and manifest are read, if it has them.
+    it the directory's sweep and manifest are read, if it has them. A read of every job
+    takes unchanged files from the read cache (`readcache`) and updates it.
     """
+    from .readcache import ReadCache, Rows
+
     run_dir = Path(run_dir)
     files, _ = result_files(run_dir)
     expected: Mapping[str, str] = {}
@@ -354,31 +437,41 @@ def read_results(
         run = load_run(run_dir)
     if run is not None:
         expected = fingerprints(run.sweep, run.manifest)
-    if job_ids is not None:
+    cache = None
+    if job_ids is not None:  # a few jobs: read them, no cache to load
         wanted = set(job_ids)
         files = {j: p for j, p in files.items() if j in wanted}
-    tables = []
+    else:
+        cache = ReadCache(run_dir)
+    rows = Rows()
     for jid, p in files.items():
-        footer = read_footer(p)
-        if footer is not None and stale_reason(footer):
-            continue  # another result format: stale (or an orphan that cannot be read)
         try:
-            meta = validate_result_file(p, jid, run_dir)
+            meta, table = cache.read(jid, p) if cache else read_checked(p, jid)[:2]
+            if table is None:
+                continue  # another result format: stale (or an orphan that cannot be read)
+            check_files(p, meta, run_dir, verify=False)
         except StoreError as err:
             raise StoreError(
                 f"{err}; rerun `woundsweep run {run_dir}` (it moves the file aside and redoes the job)"
             ) from None
         if stale_reason(meta, expected.get(jid)):
             continue
-        tables.append(meta["_table"])
-    return _frame(tables)
+        rows.append(table)
+    if cache is not None:
+        cache.save()
+    return rows.table().to_pandas()
 
 
 def scan_results(scan: StoreScan) -> pd.DataFrame:
     """The rows of the results a scan found done (what `woundsweep status` counts)."""
-    return _frame(
-        [c.meta["_table"] for c in scan.checks.values() if c.state == ResultState.DONE and c.meta]
-    )
+    if scan.rows is not None:
+        return scan.rows.to_pandas()
+    tables = [
+        c.meta["_table"] for c in scan.checks.values() if c.state == ResultState.DONE and c.meta
+    ]
+    if not tables:
+        return _SCHEMA.empty_table().to_pandas()
+    return pa.concat_tables([t.replace_schema_metadata(None) for t in tables]).to_pandas()
 
 
 def rows_element_degree(rows: pd.DataFrame) -> int | None:

@@ -226,7 +226,7 @@ def _typed(col: str, value: str) -> str:
 
 
 def main(argv: list[str] | None = None) -> None:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0].replace("\n", " "))
     p.add_argument("--jobs", type=int, default=11664, help="at most this many jobs (a sub-grid)")
     p.add_argument("--dir", type=Path, help="build the run here and keep it (reused if there)")
     p.add_argument("--views", default="0-9", help="jobs with fields and a 3D view (a-b)")

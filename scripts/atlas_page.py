@@ -204,6 +204,28 @@ def table(c: dict[str, Any], m: dict[str, Any], ends: dict[str, dict[str, str]],
     return "\n".join(lines)
 
 
+def analyze_command(m: dict[str, Any]) -> str:
+    """The `woundsweep analyze` call that wrote ``metrics.json`` (its non-default parts)."""
+    parts = ["woundsweep analyze RUN"]
+    if m.get("settings", {}).get("surrogate", "trees") != "trees":
+        parts.append(f"--param surrogate={m['settings']['surrogate']}")
+    if "off the grid" in m.get("surrogate", {}).get("calibration", ""):
+        parts.append("--calibrate-on CAL")
+    if m.get("off_grid_test"):
+        parts.append("--test-on TEST")
+    return " ".join(parts)
+
+
+def off_grid_runs(m: dict[str, Any]) -> str:
+    if not m.get("off_grid_test"):
+        return ""
+    return (
+        " CAL and TEST are runs of `sweeps/paper-between-calibration.yaml` and"
+        " `sweeps/paper-between-test.yaml` with `charted/paper-between-calibration.parquet` and"
+        " `charted/paper-between-test.parquet` unpacked into them."
+    )
+
+
 def page(run: Path, table_path: Path, beside: list[Path]) -> tuple[str, dict[str, Any]]:
     """The generated part of docs/atlas.md and the charted counts."""
     analysis = run / "analysis"
@@ -224,8 +246,8 @@ random order, so the charted share is a random sample of the grid's shards. CPU:
 (`charted/README.md`).
 
 Commands: `make chart`; `woundsweep generate sweeps/paper.yaml --out RUN`, `woundsweep unpack
-{table_path.as_posix()} RUN`, `woundsweep analyze RUN` (settings in the report below), then
-`python scripts/atlas_page.py RUN`.
+{table_path.as_posix()} RUN`, `{analyze_command(m)}` (settings in the report below), then
+`python scripts/atlas_page.py RUN`.{off_grid_runs(m)}
 
 ## The paper and ours, row by row
 

@@ -269,11 +269,15 @@ def test_the_literature_section_reads_the_solved_forces() -> None:
 
 def test_the_mesh_line_gives_each_force_s_change() -> None:
     before = state([100.0, 200.0, 100.0])
-    check = MeshLevel(1.44, 5000, np.array([98.0, 202.0, 98.0]), 0.5, 0.12)
+    # 8 times the dofs of the case's 1,000: elements 2 times smaller, read from the meshes.
+    check = MeshLevel(1.44, 8000, np.array([98.0, 202.0, 98.0]), 0.5, 0.12)
     r = result(before, steps(before), check=check)
     s = sections(render(r, "c", [], verdict(r)))
     assert "elements 2 times smaller the forces change by -2.0 to +1.0 %" in s["Bottom line"]
     assert "-2.0, +1.0, -2.0 %" in s["Mesh uncertainty"]
+    coarse = MeshLevel(1.44, 3375, np.array([98.0, 202.0, 98.0]), 0.5, 0.12)
+    r = result(before, steps(before), check=coarse)  # 3,375 dofs: 1.5 times smaller
+    assert "elements 1.5 times smaller" in sections(render(r, "c", [], verdict(r)))["Bottom line"]
     gap = "the largest surface gap after closure is 0.120 mm (here 0.000 mm; open above 0.1 mm)"
     assert gap in s["Mesh uncertainty"]
     skipped = sections(render(result(before, steps(before)), "c", []))

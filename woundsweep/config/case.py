@@ -11,7 +11,9 @@ the load after closure and the numerical settings, each default written once her
 - The solver's element (`SolverSettings.element_degree`, P2: docs/model.md "Element", P1's
   closing force keeps falling with refinement) at mesh size factor `MESH_SIZE_FACTOR`; the
   mesh check re-solves on a mesh `MESH_CHECK_FACTOR` times finer (element sizes scale with
-  (0.5 / m)^(1/3), `woundsweep.mesh.sizing`: 8 times the factor halves them).
+  (0.5 / m)^(1/3), `woundsweep.mesh.sizing`: 8 times the factor halves the size field; gmsh
+  follows it loosely on the case's coarse meshes, so the report states the ratio the meshes'
+  dofs give, about 1.4 on the 2 cm case).
 - The site: its layer thicknesses and the band of skin parameters the forces are given
   within (`SITES`); the skin type chosen is the band's central value.
 - The load after closure: by default across the wound (`ITCH_TO_WOUND_deg`), whatever the

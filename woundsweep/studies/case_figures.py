@@ -76,7 +76,7 @@ def forces_png(result: CaseResult, out: Path) -> str:
     half = result.case.length_mm / 2
     ax.set_xlim(-half, half)
     ax.set_xlabel("y: position along the wound from its centre (mm)")
-    ax.set_ylabel("suture force (N)")
+    ax.set_ylabel("force holding the edges at each suture (N)")
     ax.set_ylim(bottom=0)
     ax.legend(fontsize=8)
     atomic_write(out / "forces.png", lambda tmp: fig.savefig(tmp, dpi=110, format="png"))

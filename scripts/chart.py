@@ -59,6 +59,7 @@ def main() -> int:
         hours = (time.monotonic() - t0) / 3600
         if (a.max_shards is not None and n >= a.max_shards) or (a.hours and hours >= a.hours):
             break
+        print(f"chart: shard {k}/{a.shards} ({len(todo) - n} left, {hours:.2f} h in)", flush=True)
         _ws("run", str(a.run), "--shard", f"{k}/{a.shards}", "--workers", str(a.workers),
             "--fields", "none", "--no-progress")  # fmt: skip
         _ws("pack", str(a.run), str(a.table))

@@ -25,8 +25,9 @@ import time
 from pathlib import Path
 from typing import Any
 
-from woundsweep.analysis.shipped import describe, install, sha256_file, trained_on_record
+from woundsweep.analysis.shipped import describe, install, trained_on_record
 from woundsweep.config.manifest import load_run
+from woundsweep.store.identity import file_sha256
 from woundsweep.store.packed import read_packed
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -50,7 +51,7 @@ def _build_run(table: Path, sweep: Path, work: Path, role: str) -> tuple[str, di
     entry = {
         "role": role,
         "path": str(table),
-        "sha256": sha256_file(copy),
+        "sha256": file_sha256(copy),
         "values_sha256": footer.get("sha256"),
         "table_jobs": len(set(packed.column("job_id").to_pylist())),
         "sweep": run.sweep.name,

@@ -16,11 +16,12 @@ from typing import Any, NamedTuple
 
 import pandas as pd
 import pytest
-from synthetic_store import PREDICT_FAST, PREDICT_SWEEP, depth_stress, write_store
+from synthetic_store import PREDICT_FAST, PREDICT_FLAGS, PREDICT_SWEEP, depth_stress, write_store
 
 from woundsweep.analysis import shipped
 from woundsweep.cli import main
 from woundsweep.core.errors import AnalysisError
+from woundsweep.store.identity import file_sha256
 
 ROOT = Path(__file__).resolve().parents[2]
 SCRIPT = ROOT / "scripts" / "ship_models.py"
@@ -90,17 +91,8 @@ def _wound(sh: Shipped, shape: str, at: float) -> dict[str, Any]:
             "orientation_deg": orientation, "skin_type": r["skin_type"]}  # fmt: skip
 
 
-FLAGS = {
-    "wound_shape": "--shape", "dermal_thickness_mm": "--dermal-thickness",
-    "subcutis_thickness_factor": "--subcutis-thickness-factor",
-    "patch_size_factor": "--patch-size-factor", "wound_width_factor": "--wound-width-factor",
-    "wound_depth_factor": "--wound-depth-factor", "wound_aspect_factor": "--wound-aspect-factor",
-    "orientation_deg": "--orientation", "skin_type": "--skin-type",
-}  # fmt: skip
-
-
 def _argv(wound: dict[str, Any]) -> list[str]:
-    return [a for c, v in wound.items() for a in (FLAGS[c], str(v))]
+    return [a for c, v in wound.items() for a in (PREDICT_FLAGS[c], str(v))]
 
 
 def _expected_line(sh: Shipped) -> str:
@@ -129,7 +121,7 @@ def test_the_shipped_files_are_the_analysed_runs(built: Shipped) -> None:
     assert record["jobs"] == 72 == built.rows["job_id"].nunique()
     assert record["sweep_jobs"] == built.sweep_jobs == 108
     (table,) = record["tables"]
-    assert table["sha256"] == shipped.sha256_file(Path(table["path"]))
+    assert table["sha256"] == file_sha256(Path(table["path"]))
     assert record["settings"]["n_estimators"] == 20 and record["surrogate"] == "trees"
     assert not any(built.models.parent.glob(".models.*"))  # the staging directory is gone
 

@@ -12,21 +12,12 @@ from pathlib import Path
 
 import pandas as pd
 import pytest
-from synthetic_store import PREDICT_FAST, PREDICT_SWEEP, depth_stress, write_store
+from synthetic_store import PREDICT_FAST, PREDICT_FLAGS, PREDICT_SWEEP, depth_stress, write_store
 
 from woundsweep.cli import main
 from woundsweep.store.reader import read_results
 
 SWEEP, FAST = PREDICT_SWEEP, PREDICT_FAST
-# A table column -> the one-wound option.
-FLAGS = {
-    "wound_shape": "--shape", "dermal_thickness_mm": "--dermal-thickness",
-    "subcutis_thickness_factor": "--subcutis-thickness-factor",
-    "patch_size_factor": "--patch-size-factor", "wound_width_factor": "--wound-width-factor",
-    "wound_depth_factor": "--wound-depth-factor", "wound_aspect_factor": "--wound-aspect-factor",
-    "mesh_size_factor": "--mesh-size-factor", "orientation_deg": "--orientation",
-    "angle_to_langer_deg": "--angle-to-langer", "skin_type": "--skin-type", "stage": "--stage",
-}  # fmt: skip
 NUMBERS = [
     "stress_kPa", "interval_low_kPa", "interval_high_kPa", "level", "quantile",
     "stress_range_low_kPa", "stress_range_high_kPa", "estimate_quantile", "failure_probability",
@@ -60,7 +51,7 @@ def _wound(rd: Path, shape: str, k: int = 3) -> dict[str, object]:
 
 def _argv(wound: dict[str, object]) -> list[str]:
     """The one-wound options of a table row (a None cell: not given)."""
-    return [a for c, v in wound.items() if v is not None for a in (FLAGS[c], str(v))]
+    return [a for c, v in wound.items() if v is not None for a in (PREDICT_FLAGS[c], str(v))]
 
 
 def _write_csv(path: Path, wounds: list[dict[str, object]]) -> Path:

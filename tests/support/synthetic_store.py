@@ -97,6 +97,16 @@ PREDICT_SWEEP: dict[str, Any] = {
 PREDICT_FAST = ["--param", "n_estimators=20", "--param", "learning_rate=0.3",
                 "--param", "early_stopping_rounds=5", "--param", "sobol_samples=256"]  # fmt: skip
 
+# A predict table's column -> the one-wound option (tests/commands/test_predict_*.py).
+PREDICT_FLAGS = {
+    "wound_shape": "--shape", "dermal_thickness_mm": "--dermal-thickness",
+    "subcutis_thickness_factor": "--subcutis-thickness-factor",
+    "patch_size_factor": "--patch-size-factor", "wound_width_factor": "--wound-width-factor",
+    "wound_depth_factor": "--wound-depth-factor", "wound_aspect_factor": "--wound-aspect-factor",
+    "mesh_size_factor": "--mesh-size-factor", "orientation_deg": "--orientation",
+    "angle_to_langer_deg": "--angle-to-langer", "skin_type": "--skin-type", "stage": "--stage",
+}  # fmt: skip
+
 StressFn = Callable[[pd.DataFrame, np.random.Generator], np.ndarray]
 
 

@@ -16,17 +16,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from browser import canvas_colour_fraction, console_errors, start_chromium
+from browser import canvas_colour_fraction, console_errors
 from viz_store import make_store
 
 from woundsweep.cli import main
-
-
-@pytest.fixture(scope="module")
-def driver():
-    d = start_chromium()
-    yield d
-    d.quit()
 
 
 @pytest.fixture(scope="module")

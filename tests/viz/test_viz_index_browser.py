@@ -12,7 +12,7 @@ import time
 from pathlib import Path
 
 import pytest
-from browser import console_errors, start_chromium
+from browser import console_errors
 from synthetic_store import SMALL_SWEEP, write_store
 
 from woundsweep.cli import main
@@ -28,13 +28,6 @@ SWEEP = {
     },
 }
 JOBS = 216
-
-
-@pytest.fixture(scope="module")
-def driver():
-    d = start_chromium()
-    yield d
-    d.quit()
 
 
 @pytest.fixture(scope="module")

@@ -11,7 +11,6 @@ settings, the woundsweep version and the sha256 of every shipped model file. `ma
 
 from __future__ import annotations
 
-import hashlib
 import os
 import re
 import shutil
@@ -20,6 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from ..core.errors import AnalysisError
+from ..store.identity import file_sha256
 from .model_io import FAILURE_STEM, SURROGATE_STEM, json_bytes
 from .settings import SCHEMES
 
@@ -31,7 +31,6 @@ __all__ = [
     "model_files",
     "models_dir",
     "read_record",
-    "sha256_file",
     "shipped_model",
     "trained_on_record",
 ]
@@ -45,14 +44,6 @@ _HEX64 = re.compile(r"[0-9a-f]{64}")
 def models_dir() -> Path:
     """The package's directory of shipped models (tests point it elsewhere)."""
     return Path(__file__).resolve().parent.parent / "models"
-
-
-def sha256_file(path: Path) -> str:
-    h = hashlib.sha256()
-    with path.open("rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
 
 
 def _splits(directory: Path) -> list[str]:
@@ -137,7 +128,7 @@ def read_record(directory: Path) -> dict[str, Any]:
             problem = f"{name} is not among its files"
         elif name not in present:
             problem = f"{name} is missing"
-        elif sha256_file(directory / name) != listed[name]:
+        elif file_sha256(directory / name) != listed[name]:
             problem = f"{name} differs from the file it was written with"
         else:
             continue
@@ -234,7 +225,7 @@ def install(analysis_dir: Path, record: Mapping[str, Any], dest: Path) -> list[P
     try:
         for f in files:
             shutil.copyfile(f, stage / f.name)
-        full = {**record, "files": {f.name: sha256_file(stage / f.name) for f in files}}
+        full = {**record, "files": {f.name: file_sha256(stage / f.name) for f in files}}
         (stage / TRAINED_ON).write_bytes(json_bytes(full))
         read_record(stage)  # what predict will read: refuse to ship what it would refuse
     except BaseException:

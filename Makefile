@@ -62,17 +62,19 @@ chart: setup
 
 # The models shipped with woundsweep (woundsweep/models/, what `predict` answers with when no
 # model is given): analyze on the charted table, the intervals calibrated on the off-grid
-# table (MODELS_CAL_TABLE= skips it), MODELS_ARGS passed on to analyze: the Gaussian-process
-# surrogate, the one that holds between the grid's values (docs/atlas.md), and the classifier of
-# the geometry split only (the one for new wounds; the random split's doubles the size).
+# tables charted/NAME.parquet of sweeps/NAME.yaml for each NAME in MODELS_CAL, pooled, their
+# coverage estimated by cross-calibration (docs/model.md, "The surrogate's intervals";
+# MODELS_CAL= skips the calibration off the grid), MODELS_ARGS passed on to analyze: the
+# Gaussian-process surrogate, the one that holds between the grid's values (docs/atlas.md),
+# and the classifier of the geometry split only (the one for new wounds; the random split's
+# doubles the size).
 MODELS_TABLE ?= charted/paper.parquet
 MODELS_SWEEP ?= sweeps/paper.yaml
-MODELS_CAL_TABLE ?= charted/paper-between-calibration.parquet
-MODELS_CAL_SWEEP ?= sweeps/paper-between-calibration.yaml
+MODELS_CAL ?= paper-between-calibration paper-between-test
 MODELS_ARGS ?= --param surrogate=gp --split geometry
 models: setup
 	$(PY) scripts/ship_models.py --table $(MODELS_TABLE) --sweep $(MODELS_SWEEP) \
-	    $(if $(MODELS_CAL_TABLE),--calibrate-on-table $(MODELS_CAL_TABLE) --calibrate-sweep $(MODELS_CAL_SWEEP)) \
+	    $(foreach c,$(MODELS_CAL),--calibrate-on-table charted/$(c).parquet --calibrate-sweep sweeps/$(c).yaml) \
 	    $(MODELS_ARGS)
 
 bench: setup

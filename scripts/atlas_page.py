@@ -121,19 +121,47 @@ def _ranking(names: list[str], n: int = 4) -> str:
 
 
 def _coverage(cov: dict[str, Any]) -> str:
+    """Coverage at 80 % / 95 %, each with its counts and, where computed, its bootstrap
+    interval over the tested geometries."""
+
     def one(level: str) -> str:
         c = cov.get(level)
-        return f"{c['empirical']:.3f} ({c['covered']:,}/{c['rows']:,})" if c else "n/a"
+        if not c:
+            return "n/a"
+        ci = c.get("interval")
+        band = f"; {100 * c['interval_level']:g} % {ci[0]:.3f}-{ci[1]:.3f}" if ci else ""
+        return f"{c['empirical']:.3f} ({c['covered']:,}/{c['rows']:,}{band})"
 
     return f"{one('0.8')} / {one('0.95')}"
 
 
+def _cross(m: dict[str, Any]) -> list[str]:
+    """The rows of the cross-calibration by run: each fold, then the folds pooled."""
+    x = m["off_grid_cross_calibration"]
+    lines = [
+        f"| surrogate off the grid: coverage at 80 % / 95 %, {f['test_run']} (calibrated on"
+        f" {', '.join(f['calibrated_on'])}) | none | {_coverage(f['coverage'])},"
+        f" {f['geometries']} geometries; median error {100 * f['median_relative_error']:.1f} % |"
+        for f in x["folds"]
+    ]
+    p = x["pooled"]
+    runs = "both runs" if len(x["runs"]) == 2 else f"all {len(x['runs'])} runs"
+    lines += [
+        "| surrogate off the grid: coverage at 80 % / 95 %, folds pooled (the model's"
+        f" intervals: calibrated on {runs} pooled) | none |"
+        f" {_coverage(p['coverage'])}, {p['geometries']} geometries |",
+        f"| surrogate off the grid: median error | none | {100 * p['median_relative_error']:.1f} % |",
+    ]
+    return lines
+
+
 def _off_grid(m: dict[str, Any]) -> list[str]:
     t = m.get("off_grid_test")
+    lines = _cross(m) if m.get("off_grid_cross_calibration") else []
     if not t:
-        return ["| surrogate off the grid (`--test-on`) | none | not measured |"]
+        return lines or ["| surrogate off the grid (`--test-on`) | none | not measured |"]
     q = t["quantile_classes"]
-    return [
+    return lines + [
         f"| surrogate off the grid: coverage at 80 % / 95 % | none | {_coverage(t['coverage'])},"
         f" {t['rows']:,} rows of {t['geometries']} geometries never fitted or calibrated on |",
         f"| surrogate off the grid: median error | none | {100 * t['median_relative_error']:.1f} % |",
@@ -209,7 +237,9 @@ def analyze_command(m: dict[str, Any]) -> str:
     parts = ["woundsweep analyze RUN"]
     if m.get("settings", {}).get("surrogate", "trees") != "trees":
         parts.append(f"--param surrogate={m['settings']['surrogate']}")
-    if "off the grid" in m.get("surrogate", {}).get("calibration", ""):
+    if m.get("off_grid_cross_calibration"):
+        parts.append("--calibrate-on CAL --calibrate-on TEST")
+    elif "off the grid" in m.get("surrogate", {}).get("calibration", ""):
         parts.append("--calibrate-on CAL")
     if m.get("off_grid_test"):
         parts.append("--test-on TEST")
@@ -217,7 +247,7 @@ def analyze_command(m: dict[str, Any]) -> str:
 
 
 def off_grid_runs(m: dict[str, Any]) -> str:
-    if not m.get("off_grid_test"):
+    if not (m.get("off_grid_test") or m.get("off_grid_cross_calibration")):
         return ""
     return (
         " CAL and TEST are runs of `sweeps/paper-between-calibration.yaml` and"

@@ -1,16 +1,21 @@
 """Train the models shipped with woundsweep from charted tables (`make models`).
 
 Makes a run of ``--sweep`` in a work directory, writes the packed ``--table``'s jobs into it
-(`woundsweep unpack`), likewise a run of ``--calibrate-sweep`` from ``--calibrate-on-table``
-if given, runs `woundsweep analyze` on it (``--calibrate-on`` that run; ``--param`` and
-``--split`` passed through), then replaces ``--out`` (default: the package's
-``woundsweep/models/``) whole with the files `predict` reads and ``trained_on.json``
-(`woundsweep.analysis.shipped`). The runs are named after their sweep files and analysed
-from inside the work directory, so the model files name no temporary path.
+(`woundsweep unpack`), likewise a run of each ``--calibrate-sweep`` from the
+``--calibrate-on-table`` given with it (both repeatable, paired in order), runs `woundsweep
+analyze` on it (``--calibrate-on`` each such run: with two or more, the intervals are
+calibrated on their rows pooled and their coverage estimated by cross-calibration by run;
+``--param`` and ``--split`` passed through), then replaces ``--out`` (default: the
+package's ``woundsweep/models/``) whole with the files `predict` reads and
+``trained_on.json`` (`woundsweep.analysis.shipped`). The runs are named after their sweep
+files and analysed from inside the work directory, so the model files name no temporary
+path.
 
     python scripts/ship_models.py --table charted/paper.parquet --sweep sweeps/paper.yaml \
         --calibrate-on-table charted/paper-between-calibration.parquet \
-        --calibrate-sweep sweeps/paper-between-calibration.yaml --param surrogate=gp
+        --calibrate-sweep sweeps/paper-between-calibration.yaml \
+        --calibrate-on-table charted/paper-between-test.parquet \
+        --calibrate-sweep sweeps/paper-between-test.yaml --param surrogate=gp
 """
 
 from __future__ import annotations
@@ -65,19 +70,32 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--table", type=Path, required=True, help="packed table to train on")
     ap.add_argument("--sweep", type=Path, required=True, help="the table's sweep file")
-    ap.add_argument("--calibrate-on-table", type=Path, default=None)
-    ap.add_argument("--calibrate-sweep", type=Path, default=None)
+    ap.add_argument(
+        "--calibrate-on-table",
+        type=Path,
+        action="append",
+        default=[],
+        help="packed table of wounds between the grid's values (repeatable)",
+    )
+    ap.add_argument(
+        "--calibrate-sweep",
+        type=Path,
+        action="append",
+        default=[],
+        help="its sweep file, one per --calibrate-on-table, in the same order",
+    )
     ap.add_argument("--param", action="append", default=[], help="analyze's --param KEY=VALUE")
     ap.add_argument("--split", default="both", choices=["random", "geometry", "both"])
     ap.add_argument("--out", type=Path, default=ROOT / "woundsweep" / "models")
     ap.add_argument("--work", type=Path, default=None, help="build the runs here (kept)")
     a = ap.parse_args()
-    if (a.calibrate_on_table is None) != (a.calibrate_sweep is None):
-        ap.error("--calibrate-on-table and --calibrate-sweep go together")
-    for p in (a.table, a.sweep, a.calibrate_on_table, a.calibrate_sweep):
-        if p is not None and not p.is_file():
+    if len(a.calibrate_on_table) != len(a.calibrate_sweep):
+        ap.error("--calibrate-on-table and --calibrate-sweep go together, one of each per run")
+    for p in (a.table, a.sweep, *a.calibrate_on_table, *a.calibrate_sweep):
+        if not p.is_file():
             ap.error(f"{p}: no such file")
-    if a.calibrate_sweep is not None and a.calibrate_sweep.stem == a.sweep.stem:
+    stems = [a.sweep.stem, *(s.stem for s in a.calibrate_sweep)]
+    if len(set(stems)) != len(stems):
         ap.error("--sweep and --calibrate-sweep name their runs: give files of different names")
     t0 = time.monotonic()
     work = a.work or Path(tempfile.mkdtemp(prefix="ship-models-"))
@@ -86,10 +104,8 @@ def main() -> int:
         name, entry = _build_run(a.table, a.sweep, work, "training")
         tables = [entry]
         args = [f"--param={p}" for p in a.param] + [f"--split={a.split}"]
-        if a.calibrate_on_table is not None:
-            cal, cal_entry = _build_run(
-                a.calibrate_on_table, a.calibrate_sweep, work, "calibration"
-            )
+        for table, sweep in zip(a.calibrate_on_table, a.calibrate_sweep):
+            cal, cal_entry = _build_run(table, sweep, work, "calibration")
             tables.append(cal_entry)
             args.append(f"--calibrate-on={cal}")
         _ws("analyze", name, *args, cwd=work)

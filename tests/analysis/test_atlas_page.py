@@ -99,3 +99,36 @@ def test_run_without_analysis_is_refused(tmp_path: Path, capsys) -> None:
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "has no analysis" in err
     assert not (tmp_path / "a.md").exists()
+
+
+def _cov(empirical: float, rows: int, interval: list[float] | None) -> dict:
+    out = {"empirical": empirical, "covered": round(empirical * rows), "rows": rows}
+    return {**out, "interval": interval, "interval_level": 0.9} if interval else out
+
+
+def test_off_grid_rows_carry_the_coverage_interval_and_each_fold() -> None:
+    mod = _script()
+    cov = {"0.8": _cov(0.75, 800, [0.70, 0.81]), "0.95": _cov(0.915, 800, [0.886, 0.942])}
+    assert mod._coverage(cov) == (
+        "0.750 (600/800; 90 % 0.700-0.810) / 0.915 (732/800; 90 % 0.886-0.942)"
+    )
+    # Metrics written before the interval existed still render.
+    assert mod._coverage({"0.8": _cov(0.5, 10, None)}) == "0.500 (5/10) / n/a"
+    fold = {"rows": 800, "geometries": 24, "median_relative_error": 0.035, "coverage": cov}
+    m = {
+        "surrogate": {"calibration": "... on the rows of A and B pooled (off the grid)"},
+        "off_grid_cross_calibration": {
+            "runs": ["A", "B"],
+            "folds": [
+                {**fold, "test_run": "A", "calibrated_on": ["B"]},
+                {**fold, "test_run": "B", "calibrated_on": ["A"]},
+            ],
+            "pooled": {**fold, "rows": 1600, "geometries": 48},
+        },
+    }
+    rows = mod._off_grid(m)
+    assert len(rows) == 4 and all(r.startswith("| surrogate off the grid") for r in rows)
+    assert "A (calibrated on B)" in rows[0] and "B (calibrated on A)" in rows[1]
+    assert "calibrated on both runs pooled" in rows[2] and "48 geometries" in rows[2]
+    assert "90 % 0.700-0.810" in rows[2] and rows[3].endswith("| 3.5 % |")
+    assert mod.analyze_command(m).endswith("--calibrate-on CAL --calibrate-on TEST")

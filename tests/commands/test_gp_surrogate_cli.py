@@ -50,23 +50,30 @@ def _between(td: float, widths: list[float], aspect: list[float], depth: list[fl
     return {**SWEEP, "name": "between", "grid": grid, "shapes": shapes}
 
 
-# 48 jobs (288 rows) to calibrate on, 24 (144 rows) to test on.
+# 48 jobs (288 rows) and 24 (144 rows) to calibrate on, 24 (144 rows) to test on.
 CAL = _between(1.5, [0.37, 0.45], [0.03, 0.13], [0.37, 0.57], [15, 60])
+CAL2 = _between(1.75, [0.41], [0.05, 0.15], [0.41, 0.61], [20, 70])
 TEST = _between(1.25, [0.43], [0.07, 0.17], [0.43, 0.63], [30, 75])
 
 
 @pytest.fixture(scope="module")
 def runs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
-    """The analysed run (GP surrogate, calibrated and tested off the grid) and the two others."""
+    """The analysed run (GP surrogate, calibrated on two off-grid runs pooled and tested on a
+    third), the three others, and what analyze printed (``stdout``)."""
     base = tmp_path_factory.mktemp("gp")
-    rd = {k: base / k for k in ("run", "cal", "test")}
+    rd = {k: base / k for k in ("run", "cal", "cal2", "test")}
     write_store(rd["run"], smooth_stress, sweep=SWEEP, seed=3, failed_fraction=0.0)
     write_store(rd["cal"], smooth_stress, sweep=CAL, seed=4, failed_fraction=0.0)
+    write_store(rd["cal2"], smooth_stress, sweep=CAL2, seed=6, failed_fraction=0.0)
     write_store(rd["test"], smooth_stress, sweep=TEST, seed=5, failed_fraction=0.0)
     args = ["analyze", str(rd["run"]), "--split", "geometry", *FAST, *GP,
-            "--calibrate-on", str(rd["cal"]), "--test-on", str(rd["test"])]  # fmt: skip
-    with contextlib.redirect_stdout(io.StringIO()):
+            "--calibrate-on", str(rd["cal"]), "--calibrate-on", str(rd["cal2"]),
+            "--test-on", str(rd["test"])]  # fmt: skip
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
         assert main(args) == 0
+    rd["stdout"] = base / "analyze.txt"
+    rd["stdout"].write_text(out.getvalue())
     return rd
 
 
@@ -75,8 +82,9 @@ def test_metrics_and_report_state_the_gp_and_the_off_grid_runs(runs: dict[str, P
     m = json.loads((a / "metrics.json").read_text())
     s = m["surrogate"]
     assert s["surrogate"] == "gp" and m["settings"]["surrogate"] == "gp"
-    assert "normalised scores" in s["calibration"] and str(runs["cal"]) in s["calibration"]
-    assert s["calibration_rows"] == 288 and "importance" not in s
+    assert "normalised scores" in s["calibration"]
+    assert f"{runs['cal']} and {runs['cal2']} pooled" in s["calibration"]
+    assert s["calibration_rows"] == 288 + 144 and "importance" not in s
     assert s["gp"]["groups"] == 36 and s["gp"]["rows"] == 2 * s["gp"]["points"]
     # The GP cannot see t_d: its Sobol total index is zero exactly, not merely small.
     assert s["sensitivity"]["indices"]["dermal_thickness_mm"]["ST"] == pytest.approx(0, abs=1e-12)
@@ -85,6 +93,8 @@ def test_metrics_and_report_state_the_gp_and_the_off_grid_runs(runs: dict[str, P
     for level in ("0.8", "0.95"):
         c = off["coverage"][level]
         assert c["rows"] == 144 and 0 <= c["empirical"] <= 1
+        # Its bootstrap interval over the test run's 4 geometries (widths x offsets).
+        assert c["geometries"] == 4 and c["interval"][0] <= c["empirical"] <= c["interval"][1]
     assert 0 < off["median_relative_error"] < 0.2
     q = off["quantile_classes"]["geometry"]
     assert set(q) >= {"surrogate_accuracy", "classifier_accuracy"}
@@ -260,6 +270,7 @@ def test_runs_unlike_the_analysed_one_are_refused_in_one_line(
         (["--calibrate-on", "{run}"], "--calibrate-on {run}: the same run as the analysed run"),
         (["--test-on", "{cal}", "--calibrate-on", "{cal}"], "--test-on {cal}: the same run as --calibrate-on's"),
         (["--test-on", "{missing}"], "--test-on {missing}: no such run directory"),
+        (["--calibrate-on", "{cal}", "--calibrate-on", "{cal}"], "--calibrate-on {cal}: the same run as --calibrate-on's"),
     ],
 )  # fmt: skip
 def test_a_missing_or_repeated_run_is_refused_before_reading(
@@ -269,3 +280,28 @@ def test_a_missing_or_repeated_run_is_refused_before_reading(
     rc, _, err = run_main("analyze", runs["run"], *GP, *(a.format(**names) for a in args))
     lines = err.strip().splitlines()
     assert rc == 2 and len(lines) == 1 and needle.format(**names) in lines[0], err[-400:]
+
+
+def test_two_calibration_runs_pool_and_cross_calibrate(runs: dict[str, Path]) -> None:
+    """``--calibrate-on`` twice: the intervals rest on both runs' rows (288 + 144), and each
+    run is tested with intervals calibrated on the other alone."""
+    a = runs["run"] / "analysis"
+    m = json.loads((a / "metrics.json").read_text())
+    meta = json.loads((a / "surrogate_meta.json").read_text())
+    assert sum(len(v) for v in meta["calibration_scores_log"].values()) == 288 + 144
+    x = m["off_grid_cross_calibration"]
+    assert x["runs"] == [str(runs["cal"]), str(runs["cal2"])]
+    first, second = x["folds"]
+    fold = ("test_run", "calibrated_on", "rows", "calibration_rows")
+    assert [first[k] for k in fold] == [str(runs["cal"]), [str(runs["cal2"])], 288, 144]
+    assert [second[k] for k in fold] == [str(runs["cal2"]), [str(runs["cal"])], 144, 288]
+    for level in ("0.8", "0.95"):
+        p = x["pooled"]["coverage"][level]
+        assert p["rows"] == 432
+        covered = first["coverage"][level]["covered"] + second["coverage"][level]["covered"]
+        assert p["covered"] == covered
+        assert p["interval"][0] <= p["empirical"] <= p["interval"][1]
+    assert "## Off the grid: cross-calibration by run" in (a / "report.md").read_text()
+    out = runs["stdout"].read_text()
+    assert "cross-calibration off the grid (all folds pooled; 432 rows)" in out
+    assert f"off the grid ({runs['test']}, 144 rows): coverage" in out

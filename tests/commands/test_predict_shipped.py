@@ -261,3 +261,21 @@ def test_install_replaces_the_directory_whole(built: Shipped, tmp_path: Path) ->
     with pytest.raises(AnalysisError, match="no model_<split>.json to ship"):
         shipped.install(tmp_path / "nothing", record, dest)
     assert {p.name for p in dest.iterdir()} == SHIPPED  # a refused install changes nothing
+
+
+def test_the_line_names_pooled_calibration_runs_and_their_cross_calibration() -> None:
+    base = {"jobs": 10, "sweep_jobs": 100, "sweep": "paper", "used_rows": 50,
+            "converged_rows": 60, "surrogate": "gp"}  # fmt: skip
+    train = {"role": "training", "sweep": "paper"}
+    one = {**base, "tables": [train, {"role": "calibration", "sweep": "cal"}]}
+    assert shipped.describe(one).endswith("; gp surrogate, intervals calibrated on cal")
+    cov = {"0.8": {"empirical": 0.819}, "0.95": {"empirical": 0.942}}
+    two = {
+        **base,
+        "tables": [train, *({"role": "calibration", "sweep": n} for n in ("cal", "test"))],
+        "off_grid_coverage": {"pooled": {"coverage": cov}},
+    }
+    assert shipped.describe(two).endswith(
+        "; gp surrogate, intervals calibrated on cal and test pooled (coverage off the grid "
+        "by cross-calibration: 82% at 80%, 94% at 95%)"
+    )

@@ -36,7 +36,15 @@ from .failure import fit_failure
 from .fitting import fit_scheme
 from .mesh_sensitivity import matched_ratios, mesh_sensitivity
 from .model_io import json_bytes, save_companions, save_model
-from .offgrid import OtherRows, Reference, off_grid_test, read_other, stress_columns
+from .offgrid import (
+    OtherRows,
+    Reference,
+    cross_calibration,
+    off_grid_test,
+    pool,
+    read_other,
+    stress_columns,
+)
 from .paper import location_summary, normalised_locations, stiff_vs_soft
 from .profile_locations import profile_positions, profile_summary
 from .report import write_report
@@ -80,19 +88,29 @@ def _surrogate(
     return fit, {**fit.metrics, "sensitivity": sobol}
 
 
-def _other_paths(rd: Path, calibrate_on: str | Path | None, test_on: str | Path | None) -> None:
+def _calibration_runs(calibrate_on: str | Path | Sequence[str | Path] | None) -> list[Path]:
+    """``--calibrate-on``'s runs: none, one, or several (a path or a sequence of them)."""
+    if calibrate_on is None:
+        return []
+    if isinstance(calibrate_on, (str, Path)):
+        return [Path(calibrate_on)]
+    return [Path(p) for p in calibrate_on]
+
+
+def _other_paths(rd: Path, calibrate_on: Sequence[Path], test_on: str | Path | None) -> None:
     """Refuse a ``--calibrate-on`` or ``--test-on`` run that is missing, or the same run as
-    the analysed one or the other option's (checked before anything is read)."""
-    named = {"the analysed run": rd.resolve()}
-    for option, path in (("--calibrate-on", calibrate_on), ("--test-on", test_on)):
+    the analysed one or another option's (checked before anything is read)."""
+    named = [("the analysed run", rd.resolve())]
+    given = [("--calibrate-on", p) for p in calibrate_on] + [("--test-on", test_on)]
+    for option, path in given:
         if path is None:
             continue
         if not Path(path).is_dir():
             raise AnalysisError(f"{option} {path}: no such run directory")
-        same = [k for k, v in named.items() if Path(path).resolve() == v]
+        same = [k for k, v in named if Path(path).resolve() == v]
         if same:
             raise AnalysisError(f"{option} {path}: the same run as {same[0]}")
-        named[f"{option}'s"] = Path(path).resolve()
+        named.append((f"{option}'s", Path(path).resolve()))
 
 
 class AnalysisOutput(NamedTuple):
@@ -114,7 +132,7 @@ def run_analysis(
     keep_duplicates: bool = False,
     stress: str = STRESS,
     beside: Sequence[str | Path] = (),
-    calibrate_on: str | Path | None = None,
+    calibrate_on: str | Path | Sequence[str | Path] | None = None,
     test_on: str | Path | None = None,
 ) -> AnalysisOutput:
     """Fit and evaluate each scheme; write metrics, models, figures and report.md.
@@ -125,8 +143,10 @@ def run_analysis(
     steps below read it under `STRESS`, and metrics.json and the model files name it.
     ``beside`` are runs closed by other closing loads, drawn beside this one's in Figure 2
     (`woundsweep.analysis.closures`). ``calibrate_on``: a run (wounds between the grid's
-    values) whose rows calibrate the surrogate's intervals; ``test_on``: a run whose rows
-    test the surrogate and the classifiers and nothing else (`woundsweep.analysis.offgrid`).
+    values) whose rows calibrate the surrogate's intervals, or several: calibrated on their
+    rows pooled, the coverage estimated by cross-calibration by run; ``test_on``: a run whose
+    rows test the surrogate and the classifiers and nothing else
+    (`woundsweep.analysis.offgrid`).
     """
     say = echo or (lambda _line: None)
     import xgboost as xgb
@@ -141,7 +161,8 @@ def run_analysis(
     for s in schemes:
         if s not in SCHEMES:
             raise AnalysisError(f"unknown split scheme {s!r} (expected one of {SCHEMES})")
-    _other_paths(rd, calibrate_on, test_on)
+    cal_paths = _calibration_runs(calibrate_on)
+    _other_paths(rd, cal_paths, test_on)
     say("reading the results...")
     run = run_or_none(rd)  # the sweep and manifest, read once for every step below
     sweep_analysis, skins = sweep_settings(run)
@@ -183,7 +204,8 @@ def run_analysis(
                    "keep_duplicates": keep_duplicates, "stress": column},
     )  # fmt: skip
     # Read and checked before any training.
-    cal_rows = None if calibrate_on is None else read_other(calibrate_on, "--calibrate-on", ref)
+    cal_runs = [read_other(p, "--calibrate-on", ref) for p in cal_paths]
+    cal_rows = pool(cal_runs) if cal_runs else None
     test_rows = None if test_on is None else read_other(test_on, "--test-on", ref)
     fits = []
     for s in schemes:
@@ -231,6 +253,8 @@ def run_analysis(
     }
     if closures is not None:
         metrics["closures"] = closures
+    if len(cal_runs) > 1 and surrogate is not None:
+        metrics["off_grid_cross_calibration"] = cross_calibration(surrogate.model, cal_runs)
     if test_rows is not None:
         metrics["off_grid_test"] = (
             off_grid_test(surrogate.model, surrogate.meta["calibration_scores_log"], test_rows,

@@ -10,9 +10,11 @@ geometries that differ only in t_d are one group: it cannot tell them apart). It
 geometries train the surrogate; its validation geometries are halved at random into
 early-stopping rows (the trees'; the GP trains on them) and calibration rows (`conformal`);
 its test geometries are used once, for RMSE and the empirical coverage at
-`COVERAGE_LEVELS`. Scores are ``|log y - mean| / sd`` per stage (sd = 1 for the trees).
-Calibrated off the grid (``calibration``: another run's rows, `analyze --calibrate-on`), the
-scores come from those rows and the grid's calibration geometries join the training rows.
+`COVERAGE_LEVELS`, with its bootstrap interval over the test geometries (`conformal`).
+Scores are ``|log y - mean| / sd`` per stage (sd = 1 for the trees). Calibrated off the grid
+(``calibration``: another run's rows, or several runs' pooled, `analyze --calibrate-on`),
+the scores come from those rows and the grid's calibration geometries join the training
+rows.
 """
 
 from __future__ import annotations
@@ -169,6 +171,8 @@ def fit_surrogate(
     y = np.log(rows[STRESS].to_numpy(dtype=np.float64))
     stage = rows["stage"].to_numpy(dtype=np.int64)
     split = surrogate_split(geometry_groups(rows, scale_free=kind == "gp"), settings)
+    # The coverage's bootstrap clusters: rows that differ only in t_d are one wound.
+    clusters = geometry_groups(rows, scale_free=True)
     for name, idx in split._asdict().items():
         if len(idx) == 0:
             raise AnalysisError(
@@ -210,7 +214,7 @@ def fit_surrogate(
             "rmse_log": float(np.sqrt(np.mean(resid**2))),
             "r2_log": 1.0 - float(np.sum(resid**2)) / ss_tot if ss_tot > 0 else None,
             "coverage": {
-                str(lv): coverage(y[test], pred, stage[test], scores, lv, sd_test)
+                str(lv): coverage(y[test], pred, stage[test], scores, lv, sd_test, clusters[test])
                 for lv in COVERAGE_LEVELS
             },
         },

@@ -9,6 +9,7 @@ from typing import Any
 from ..core.fsutil import atomic_write_bytes
 from .closures import report_lines as closure_report_lines
 from .mesh_sensitivity import report_lines as mesh_report_lines
+from .offgrid import coverage_text, cross_report_lines
 from .offgrid import report_lines as off_grid_report_lines
 from .profile_locations import report_lines as profile_report_lines
 
@@ -76,10 +77,19 @@ def summary(metrics: dict[str, Any]) -> list[str]:
         )
     if "test" in sur:
         cov = sur["test"]["coverage"].get("0.8") or next(iter(sur["test"]["coverage"].values()))
+        ci = cov.get("interval")
         out.append(
-            f"The stress estimate's 80% interval held for {100 * (cov['empirical'] or 0):.0f}% "
-            f"of {cov['rows']} test rows from {sur['split_geometries']['test']} geometries "
-            f"(about {cov['median_width_factor'] or float('nan'):.2g}x from its low to its high end)."
+            f"The stress estimate's {100 * cov['nominal']:g}% interval held for "
+            f"{100 * (cov['empirical'] or 0):.0f}% of {cov['rows']} test rows from "
+            f"{sur['split_geometries']['test']} geometries"
+            + (
+                f" ({100 * cov['interval_level']:g}% bootstrap interval over the geometries "
+                f"{100 * ci[0]:.0f}-{100 * ci[1]:.0f}%;"
+                if ci
+                else " ("
+            )
+            + f" about {cov['median_width_factor'] or float('nan'):.2g}x from its low to its "
+            "high end)."
         )
     svs = metrics["stiff_vs_soft"]
     for shape, st in svs.items():
@@ -232,6 +242,7 @@ def render_report(metrics: dict[str, Any], figures: Sequence[str]) -> str:
         )
     lines += surrogate_lines(metrics)
     lines += off_grid_report_lines(metrics)
+    lines += cross_report_lines(metrics)
     if "max_location_profiles" in metrics:
         lines += profile_report_lines(metrics)
     lines += closure_report_lines(metrics)
@@ -293,14 +304,14 @@ def surrogate_lines(metrics: dict[str, Any]) -> list[str]:
                 if sur["split_geometries"]["test"] < 10
                 else []
             ),
-            "| nominal | empirical coverage | covered / rows | median width (upper / lower) | "
-            "lowest stage coverage |",
+            "| nominal | empirical coverage (bootstrap interval over geometries) | covered / "
+            "rows | median width (upper / lower) | lowest stage coverage |",
             "|---|---|---|---|---|",
         ]
         for level, c in t["coverage"].items():
             per = [v["empirical"] for v in c["by_stage"].values() if v["empirical"] is not None]
             lines.append(
-                f"| {100 * float(level):g}% | {_f(c['empirical'])} | {c['covered']} / {c['rows']} "
+                f"| {100 * float(level):g}% | {coverage_text(c)} | {c['covered']} / {c['rows']} "
                 f"| {_f(c['median_width_factor'], '.3g')}x | {_f(min(per) if per else None)} |"
             )
     lines += ["", "## Failure model (jobs that did not converge)", "", fail.get("statement", "n/a")]

@@ -162,9 +162,24 @@ def describe(record: Mapping[str, Any]) -> str:
     jobs, total = record["jobs"], record["sweep_jobs"]
     kind = record["surrogate"]
     surrogate = f"{kind} surrogate" if kind else "no stress surrogate"
-    calibration = [t for t in record["tables"] if t["role"] == "calibration"]
-    if calibration:
-        surrogate += f", intervals calibrated on {calibration[0].get('sweep') or 'another run'}"
+    calibration = [t.get("sweep") or "another run" for t in record["tables"]
+                   if t["role"] == "calibration"]  # fmt: skip
+    if len(calibration) == 1:
+        surrogate += f", intervals calibrated on {calibration[0]}"
+    elif calibration:
+        surrogate += (
+            f", intervals calibrated on {', '.join(calibration[:-1])} and {calibration[-1]} pooled"
+        )
+    cross = record.get("off_grid_coverage")
+    if cross:
+        cov = cross["pooled"]["coverage"]
+        surrogate += (
+            " (coverage off the grid by cross-calibration: "
+            + ", ".join(
+                f"{100 * c['empirical']:.0f}% at {100 * float(lv):g}%" for lv, c in cov.items()
+            )
+            + ")"
+        )
     return (
         f"shipped model: trained on {jobs:,} of {total:,} {record['sweep']} jobs "
         f"({100 * jobs / total:.3g} %; {record['used_rows']:,} of their "
@@ -202,6 +217,8 @@ def trained_on_record(
         "surrogate": sur.get("surrogate"),
         "calibration": sur.get("calibration"),
         "calibration_rows": sur.get("calibration_rows"),
+        # Calibrated on several runs pooled: the coverage off the grid by cross-calibration.
+        "off_grid_coverage": metrics.get("off_grid_cross_calibration"),
         "stress": metrics.get("stress"),
         "settings": metrics["settings"],
         "analyze_arguments": list(arguments),

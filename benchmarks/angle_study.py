@@ -11,7 +11,8 @@ each into ``OUT_DIR/<skin>-<angle>``, then writes ``OUT_DIR/angle_study.csv`` an
 ``OUT_DIR/angle_study.png`` and prints the table. With ``--aspects 2.5,3,4`` it also solves
 the same 2 cm ellipse of normal skin along the Langer line at those length-to-width ratios
 (``OUT_DIR/aspect-<ratio>``) and prints the dog-ear height against the ratio
-(``OUT_DIR/aspect_study.csv``). About half a minute per case on one core.
+(``OUT_DIR/aspect_study.csv``). About half a minute per case on one core. With ``-- --threads``
+the table adds each case's peak and end thread tensions (`woundsweep case --threads`).
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ import json
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 __all__ = ["main"]
 
@@ -28,17 +30,31 @@ SKINS = ("soft", "normal", "stiff")
 WS = [sys.executable, "-m", "woundsweep"]
 
 
+def _thread_columns(case: dict[str, Any]) -> dict[str, Any]:
+    """With ``--threads`` among the case flags: the threads' tensions (mN), peak and ends."""
+    th = case.get("threads")
+    if not th:
+        return {}
+    t = th["tension_mN"]
+    return {
+        "peak_thread_tension_mN": max(t),
+        "end_thread_tension_mN": min(t[0], t[-1]),
+        "thread_status": th["status"],
+    }
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("out", type=Path)
     parser.add_argument("--angles", default="0,15,30,45,60,75,90")
+    parser.add_argument("--skins", default=",".join(SKINS), help="skin types, e.g. normal")
     parser.add_argument("--aspects", default="", help="length / width ratios, e.g. 2.5,3,4")
     parser.add_argument("extra", nargs="*", help="further `woundsweep case` flags")
     args = parser.parse_args(argv)
     angles = [float(a) for a in args.angles.split(",")]
     args.out.mkdir(parents=True, exist_ok=True)
     rows = []
-    for skin in SKINS:
+    for skin in args.skins.split(","):
         for angle in angles:
             out = args.out / f"{skin}-{angle:g}"
             case = _case(out, ["--angle-deg", f"{angle:g}", "--skin", skin, *args.extra])
@@ -55,6 +71,7 @@ def main(argv: list[str] | None = None) -> int:
                     "end_suture_force_mN": min(forces[0], forces[-1]),
                     "dog_ear_height_mm": case["dog_ear_height_mm"],
                     "closed": case["closed"],
+                    **_thread_columns(case),
                 }
             )
     import matplotlib
@@ -109,7 +126,7 @@ def main(argv: list[str] | None = None) -> int:
 _ONLY_FORCES = ["--no-even", "--no-compare", "--no-band", "--no-scan", "--no-mesh-check"]
 
 
-def _case(out: Path, flags: list[str]) -> dict | None:  # type: ignore[type-arg]
+def _case(out: Path, flags: list[str]) -> dict[str, Any] | None:
     """``woundsweep case`` into ``out`` (kept: a rerun reads it) and its case.json."""
     if not (out / "case.json").is_file():
         cmd = [*WS, "case", "--out", str(out), *_ONLY_FORCES, *flags]

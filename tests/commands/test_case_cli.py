@@ -5,6 +5,7 @@ the mesh check and two finer meshes)."""
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import pytest
@@ -64,11 +65,32 @@ def test_case_writes_its_report(tmp_path: Path) -> None:
 def test_case_without_the_optional_solves_says_so(tmp_path: Path) -> None:
     out = tmp_path / "report"
     skip = ["--no-even", "--no-compare", "--no-band", "--no-scan", "--no-mesh-check"]
-    res = ws("case", "--out", str(out), *SMALL, "--itch-angle-deg", "90", *skip, timeout=300)
+    res = ws(
+        "case", "--out", str(out), *SMALL, "--itch-angle-deg", "90", *skip, "--view",
+        "--threads", timeout=600,
+    )  # fmt: skip
     assert res.returncode == 0, res.stderr
+    # --view: view.html, the sutured state and the load's end, three threads each.
+    page = (out / "view.html").read_text()
+    view = json.loads(re.search(r'id="wsdata">(.*?)</script>', page, re.S).group(1))
+    assert [s["label"] for s in view["stages"]] == [
+        "sutured", "at the end of the load after closure"
+    ]  # fmt: skip
+    for s in view["stages"]:
+        assert sum(t["group"] == "threads (sutures)" for t in s["traces"]) == 3
+        assert s["p99_von_mises_kPa"] > 0 and s["closure"] is not None
+    assert "[view.html](view.html)" in (out / "report.md").read_text()
     data = json.loads((out / "case.json").read_text())
     # The load's direction given against the Langer line: 90 to it is 65 to this wound.
     assert data["load"]["to_langer_deg"] == 90.0 and data["load"]["to_wound_deg"] == 65.0
     assert data["band"] == {} and len(data["scan"]) == 1 and "mesh_check" not in data
     report = (out / "report.md").read_text()
     assert "the mesh check was skipped (`--no-mesh-check`)" in report
+    # --threads: each knot tightened until the edges meet under it, the tensions reported
+    # beside the apposition forces, in the report, its literature table and case.json.
+    th = data["threads"]
+    assert th["status"] == "converged" and len(th["tension_mN"]) == 3
+    assert max(th["gap_at_suture_mm"]) <= data["open_gap_mm"]
+    assert all(t > 0 for t in th["tension_mN"]) and all(s >= 0 for s in th["knot_shortening_mm"])
+    assert th["pull_mN"] == pytest.approx([2 * t for t in th["tension_mN"]], rel=0.05)
+    assert "## Sutures as threads" in report and "threads tightened until the edges meet" in report

@@ -6,8 +6,9 @@ patient itches"; by default across the wound) and the same load along the scan's
 directions, a placement that evens the suture forces (by re-solving), the site's band of skin
 types, the same wound along the Langer line and the sutures on a mesh with elements half the
 size, and writes DIR/report.md, DIR/case.json and figures (`woundsweep.studies.case`,
-`woundsweep.studies.case_report`). Exit status: 0 solved; 2 bad input (one line); 3 a solve did
-not converge; 4 the excision could not be meshed.
+`woundsweep.studies.case_report`); with --view also DIR/view.html, the sutured wound in 3D
+(`woundsweep.viz.view.fields_page`, the viewer of `woundsweep view`). Exit status: 0 solved;
+2 bad input (one line); 3 a solve did not converge; 4 the excision could not be meshed.
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ import logging
 import shlex
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING, cast
 
 import click
 
@@ -29,22 +31,29 @@ from ..config.case import (
     SCAN_TO_WOUND_deg,
 )
 from ..config.sutures import BODY_SITES, ITCH_KINDS, BITE_WIDTH_mm, ItchLoad
+from ..core.schema import PROFILE_LINES
 
-__all__ = ["cmd"]
+if TYPE_CHECKING:
+    from ..studies.case import CaseResult
+    from ..studies.case_view import CaseView
+    from ..viz.jobdata import JobFields
+
+__all__ = ["VIEW_HTML", "cmd", "write_view"]
 
 _ITCH = ItchLoad()
 
 
 # What a case writes into --out (`studies.case_report`).
-_REPORT_FILES = ("report.md", "case.json", "forces.png", "wound.png", "view.png")
+_REPORT_FILES = ("report.md", "case.json", "forces.png", "wound.png", "view.png", "view.html")
+VIEW_HTML = "view.html"
 
 
-def _set_aside_previous(out: Path) -> None:
-    """Move an earlier case's report files in ``out`` to ``out/previous/`` (kept, not taken
-    for this case's), replacing what an earlier failure put there."""
+def _set_aside_previous(out: Path, names: tuple[str, ...] = _REPORT_FILES) -> None:
+    """Move an earlier case's report files (``names``) in ``out`` to ``out/previous/`` (kept,
+    not taken for this case's), replacing what an earlier failure put there."""
     import os
 
-    found = [out / n for n in _REPORT_FILES if (out / n).is_file() and not (out / n).is_symlink()]
+    found = [out / n for n in names if (out / n).is_file() and not (out / n).is_symlink()]
     if not found:
         return
     dst = out / "previous"
@@ -177,16 +186,34 @@ def _set_aside_previous(out: Path) -> None:
     is_flag=True,
     help="Also solve the sutures on two finer meshes (mesh factor x2.25, x5.06).",
 )
+@click.option(
+    "--view",
+    is_flag=True,
+    help="Also write DIR/view.html: the sutured wound in 3D, interactive (the viewer of "
+    "`woundsweep view`: the deformed surface coloured by von Mises in kPa, the threads, the "
+    "wound's rim; the state at the end of the load too), one self-contained file of about "
+    "5 MB that opens offline.",
+)
+@click.option(
+    "--threads",
+    is_flag=True,
+    help="Also close the wound by 4-0 nylon threads (each knot tightened until the edges meet "
+    "under it) and report each thread's tension beside the apposition force, the gaps "
+    "between the stitches and the tensions under the load (about five more solves).",
+)
 def cmd(out: Path, length_mm: float, width_mm: float | None, angle_deg: float, site: str,
         dermis_mm: float | None, subcutis_mm: float | None, depth_mm: float | None, skin: str,
         count: int | None, spacing_mm: float | None, bite_width_mm: float,
         bite_depth_mm: float | None, itch_strain: float, itch_to_wound_deg: float,
         itch_angle_deg: float | None, itch_kind: str, element: int, mesh_factor: float,
         no_even: bool, no_compare: bool, no_band: bool, no_scan: bool, no_mesh_check: bool,
-        converge: bool) -> None:  # fmt: skip
+        converge: bool, view: bool, threads: bool) -> None:  # fmt: skip
     """Solve one clinical case and write its report (the bottom line, forces per suture with
     the site's band, where to place them, what a load after closure does, the forces against
-    the literature, the mesh check)."""
+    the literature, the mesh check). With --view also view.html, the sutured wound in 3D:
+    the deformed skin coloured by von Mises (kPa), each suture's thread drawn from bite to
+    bite, the wound's rim outlined, a deformation scale and a cut at the wound's middle. With
+    --threads also the sutures as threads: each thread's tension (N) and the gaps."""
     from ..config.case import ClinicalCase
     from ..config.sutures import CaseError, SuturePlan
     from ..core.fsutil import check_output_dir
@@ -221,11 +248,93 @@ def cmd(out: Path, length_mm: float, width_mm: float | None, angle_deg: float, s
         result = run_case(
             case, echo=lambda s: click.echo(s), compare=not no_compare, even=not no_even,
             converge=converge, band=not no_band, scan=not no_scan, mesh_check=not no_mesh_check,
+            view=view, threads=threads,
         )  # fmt: skip
         command = "woundsweep " + " ".join(shlex.quote(a) for a in sys.argv[1:])
-        path = write_report(result, out, command)
+        pages = (write_view(result, out),) if view else ()
+        path = write_report(result, out, command, pages)
     except BaseException:
         _set_aside_previous(out)  # a failed case leaves no earlier case's report as its own
         raise
+    if not view:
+        _set_aside_previous(out, (VIEW_HTML,))  # an earlier case's view is not this one's
     click.echo(path.read_text())
     click.echo(f"wrote {path}")
+
+
+def _fields(cv: CaseView) -> JobFields:
+    """The case's states as the viewer's `JobFields`: one "stage" per state, no job."""
+    import numpy as np
+
+    from ..config.manifest import JobRow
+    from ..core.schema import StageStatus
+    from ..store.solverfile import CLOSURE_LINE_DATASETS
+    from ..viz.jobdata import JobFields, StageNote
+
+    rows, fields, profiles, lines = [], {}, {}, {}
+    for k, st in enumerate(cv.states, 1):
+        rows.append({"stage": k, "status": StageStatus.CONVERGED, "element_degree": cv.element_degree,
+                     "p99_von_mises_kPa": st.p99_von_mises_kPa,
+                     "max_von_mises_kPa": st.max_von_mises_kPa})  # fmt: skip
+        fields[k] = (st.displacement_mm, st.von_mises_kPa)
+        profiles[k] = {
+            name: {"points_mm": st.profile_points_mm[i], "von_mises_kPa": st.profile_von_mises_kPa[i]}
+            for i, name in enumerate(PROFILE_LINES[: len(st.profile_points_mm)])
+        }  # fmt: skip
+        loads = (st.line_y_mm, st.closing_mN_per_mm, st.contact_mN_per_mm)
+        if all(a is not None for a in loads):
+            lines[k] = dict(zip(CLOSURE_LINE_DATASETS, cast("tuple[np.ndarray, ...]", loads)))
+    job = cast(JobRow, {"job_index": 0, "job_id": "case"})
+    return JobFields(
+        job, rows, cv.points_mm, cv.cells, cv.cell_tags, cv.facets, cv.facet_tags,
+        np.zeros(len(cv.facets), bool), fields,
+        [StageNote(k, StageStatus.CONVERGED, True, "") for k in fields],
+        profiles=profiles, closure_lines=lines, source="woundsweep case",
+    )  # fmt: skip
+
+
+def write_view(result: CaseResult, out: Path) -> str:
+    """DIR/view.html (`VIEW_HTML`): the case's states in the viewer of `woundsweep view`, the
+    threads and the wound's rim as extra lines; its name."""
+    from html import escape
+
+    from ..core.fsutil import atomic_write
+    from ..studies.case_view import view_lines
+    from ..viz.view import LineTrace, fields_page
+
+    cv = result.view
+    assert cv is not None and cv.states, "run_case(view=True) captures the sutured state"
+    c = result.case
+    traces = {k: [LineTrace(*ln) for ln in view_lines(cv, st)] for k, st in enumerate(cv.states, 1)}
+    forces = ", ".join(f"{f:.0f}" for f in cv.states[0].suture_force_mN)
+    title = (
+        f"Case: {c.length_mm:g} x {c.width:.3g} mm excision at {c.angle_deg:g} degrees to the "
+        f"Langer line, {len(cv.bites)} sutures"
+    )
+    before = (
+        f"<p>The sutured wound ({escape(c.skin_type)} skin, {escape(c.site)}); the sutures' "
+        f"forces after closure: {escape(forces)} mN, from one end of the wound to the other. "
+        'The report: <a href="report.md">report.md</a>.</p>\n'
+    )
+    page = fields_page(
+        _fields(cv), title, traces=traces, legend=_LEGEND, before=before, initial=1,
+        camera={"eye": {"x": 0.55, "y": -0.85, "z": 0.7}},  # the wound, the patch around it
+        labels={k: st.label for k, st in enumerate(cv.states, 1)},
+    )  # fmt: skip
+    data = page.encode("utf-8")
+    atomic_write(out / VIEW_HTML, lambda tmp: Path(tmp).write_bytes(data))
+    return VIEW_HTML
+
+
+_LEGEND = (
+    "Left: the deformed skin (displacement times the deformation scale), each triangle "
+    "coloured by the von Mises stress of the tetrahedron it bounds (its cell mean, kPa); the "
+    "colour scale ends at the state's p99 of the volume, the cells above it shaded pale to "
+    "deep magenta up to the largest; red: each suture's thread drawn from bite to bite as an "
+    "arc above the skin (a drawing of where each suture holds, not the thread's path through "
+    "the skin), its force on hover; black: the wound's rim at the skin surface; red "
+    "diamond: the cell of the largest cell mean. The cut shows the half y &ge; the wound's "
+    "middle. Right: von Mises along the profile lines (reference configuration); below it, "
+    "along the wound, the sutures' pull per unit length (closing force) and the walls' "
+    "contact force per unit length. Lengths in mm, stresses in kPa, line loads in mN/mm."
+)

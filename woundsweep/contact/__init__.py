@@ -5,11 +5,13 @@ two-pass penalty on the flanks' smooth implicit surfaces (`woundsweep.contact.sm
 tangent's sparsity `CouplingPlan` plans (`woundsweep.contact.pattern`);
 `ContactMultipliers` carries its multipliers through Newton (the semi-smooth contact step,
 `woundsweep.contact.multipliers`); `ZoneTie` holds the closure zone's flanks together (the sutures)
-(`woundsweep.contact.tie`); `audit_interpenetration` counts flank nodes inside the other side's
+(`woundsweep.contact.tie`); `Cables` are the sutures' threads (`woundsweep.contact.cable`);
+`audit_interpenetration` counts flank nodes inside the other side's
 deformed cells, independently of the contact (`woundsweep.contact.audit`).
 """
 
 from .audit import AuditResult, audit_interpenetration, audit_model
+from .cable import Anchor, Cables
 from .geometry import orient_outward, owning_cells, split_wound_flanks
 from .multipliers import ContactMultipliers
 from .pattern import CouplingPlan
@@ -19,7 +21,9 @@ from .tie import ZoneTie
 
 __all__ = [
     "GPA_TO_KPA",
+    "Anchor",
     "AuditResult",
+    "Cables",
     "ContactModel",
     "ContactMultipliers",
     "ContactSummary",

@@ -14,7 +14,7 @@ import numpy as np
 
 from ..config.paper import StageSettings
 from ..config.solver import NewtonSettings, SolverSettings
-from ..contact import GPA_TO_KPA, FlankContact, ZoneTie, split_wound_flanks
+from ..contact import GPA_TO_KPA, Cables, FlankContact, ZoneTie, split_wound_flanks
 from ..core.schema import DERMIS, SUBCUTIS, MeshData
 from ..solver.continuation import ContinuationResult
 from ..solver.newton import NewtonSolver
@@ -108,8 +108,15 @@ class WoundModel:
         left, right = self.flanks
         self.tie = tie
         self.contact = FlankContact(d.X, left, right, tied=tie.pairs.ravel())
+        cables = self.problem.cables
         self.problem = WoundProblem(d, self.forms, self.contact, tie)
+        self.problem.set_cables(cables)
         self.newton = NewtonSolver(self.problem, self.problem.A, self.settings)
+
+    def attach_cables(self, cables: Cables | None) -> None:
+        """Hold the wound by ``cables`` too (the sutures' threads, `woundsweep.contact.cable`;
+        None: none): their term joins the problem's residual, tangent and energy once tied."""
+        self.problem.set_cables(cables)
 
     def set_newton_settings(self, settings: NewtonSettings) -> None:
         """Solve with ``settings`` from here on (a Newton solver made anew on the problem)."""

@@ -5,14 +5,15 @@ nodal force vector, ``closure_load``), the flank contact (a `woundsweep.contact.
 or None for an unwounded patch) and the closure zone's tangential tie
 (`woundsweep.contact.ZoneTie`) into the `woundsweep.solver.NonlinearProblem` protocol. The
 contact and tie terms are added while the penalty is on (``contact.k_V_kPa > 0``; the tie only
-once set); ``multipliers`` are the contact multipliers Newton carries there. The potential is
+once set); the sutures' threads (``cables``, `woundsweep.contact.Cables`, None without) once
+tied, whatever the penalty; ``multipliers`` are the contact multipliers Newton carries there. The potential is
 not used by Newton: that it exists (every load is dead) makes the tangent symmetric, and
 `tests/physics/test_stages_contact.py` checks R = dPi/du.
 
 Sparsity of the tangent matrix ``A``: while the contact is off, that of the form; while it is
 on, the form's plus the contact's coupling pattern (planned at the first tangent of a contact
 episode, grown by the contact when a tangent reaches past it) plus the tie's fixed pairs,
-preallocated at once. Between the growths the Newton steps add no nonzeros, so PETSc does not
+preallocated at once; the threads' fixed pattern is added to either once they are attached. Between the growths the Newton steps add no nonzeros, so PETSc does not
 reallocate and MUMPS keeps its symbolic analysis.
 
 Where DOLFINx makes one, the tangent is assembled into a block matrix (BAIJ, 3x3 node blocks:
@@ -30,7 +31,7 @@ import numpy as np
 import scipy.sparse
 from petsc4py import PETSc
 
-from ..contact import ContactModel, ContactMultipliers, ZoneTie
+from ..contact import Cables, ContactModel, ContactMultipliers, ZoneTie
 from . import compat
 from .assembly import add_csr, add_vector, structure
 from .domain import WoundDomain
@@ -65,6 +66,9 @@ class WoundProblem:
         self.domain, self.forms, self.contact, self.tie = domain, forms, contact, tie
         # Dead nodal forces (mN, flat dofs) of the closure of stages 3-6; None: no such load.
         self.closure_load: np.ndarray | None = None
+        # The sutures as threads (`woundsweep.contact.cable`); in A's pattern once preallocated.
+        self.cables: Cables | None = None
+        self._cables_in_pattern = False
         self.A = compat.create_matrix(forms.a_form)
         self._B = compat.create_block_matrix(forms.a_form)  # None: assemble into A itself
         self._B_nnz: float | None = None  # B's entries when A last took its structure
@@ -96,17 +100,24 @@ class WoundProblem:
             add_vector(b, c.force_vector(u))
             if self.tie is not None and self.tie.active:
                 add_vector(b, self.tie.force_vector(u, c.k_V_kPa))
+        if self.cables is not None and self.cables.active:
+            add_vector(b, self.cables.force_vector(self.solution()))
 
     def jacobian(self, A: PETSc.Mat) -> None:
         c = self._contact_on()
         if A is not self.A:  # not the problem's matrix: its pattern grows by insertion
-            compat.assemble_matrix(A, self.forms.a_form, finalize=c is None)
+            threads = self.cables is not None and self.cables.active
+            compat.assemble_matrix(A, self.forms.a_form, finalize=c is None and not threads)
             if c is not None:
                 self._add_contact(A, c, c.tangent_csr(self.solution()))
+            if threads:
+                self._add_cables(A)
+            if c is not None or threads:
                 A.assemble()
             return
         if c is None:
-            if self._pattern_version is not None:  # a contact episode ended
+            missing = self.cables is not None and not self._cables_in_pattern
+            if self._pattern_version is not None or missing:  # a contact episode ended
                 self._preallocate(A, None)
             self._assemble(A)
             if self._form_structure is None:
@@ -116,7 +127,9 @@ class WoundProblem:
         if c.coupling_pattern() is None:
             c.plan_pattern(u)
         K = c.tangent_csr(u)  # grows the coupling pattern if it reaches past it
-        if self._pattern_version != c.pattern_version:
+        if self._pattern_version != c.pattern_version or (
+            self.cables is not None and not self._cables_in_pattern
+        ):
             self._preallocate(A, c)
         self._assemble(A, c, K)
 
@@ -127,6 +140,7 @@ class WoundProblem:
         compat.assemble_matrix(M, self.forms.a_form, finalize=False)
         if c is not None:
             self._add_contact(M, c, K)
+        self._add_cables(M)
         M.assemble()
         if M is A:
             return
@@ -149,6 +163,17 @@ class WoundProblem:
         if self.tie is not None and self.tie.active:
             add_csr(M, self.tie.tangent_csr(c.k_V_kPa), finalize=False)
 
+    def set_cables(self, cables: Cables | None) -> None:
+        """Add the threads ``cables`` to the problem (None: none); A's pattern takes theirs at
+        the next tangent."""
+        self.cables = cables
+        self._cables_in_pattern = False
+
+    def _add_cables(self, M: PETSc.Mat) -> None:
+        """Add the threads' tangent to ``M``, unfinalised (nothing while they are untied)."""
+        if self.cables is not None and self.cables.active:
+            add_csr(M, self.cables.tangent_csr(self.solution()), finalize=False)
+
     @staticmethod
     def _structure_of(A: PETSc.Mat) -> Any:
         """The nonzero structure of the assembled matrix ``A`` (scipy CSR of ones)."""
@@ -170,6 +195,9 @@ class WoundProblem:
                 parts.append(self.tie.coupling_pattern())
         elif self.contact is not None:
             self.contact.clear_pattern()
+        if self.cables is not None:
+            parts.append(self.cables.coupling_pattern())
+        self._cables_in_pattern = self.cables is not None
         P = structure(*parts)
         # The block matrix holds whole 3x3 blocks; A takes its entries at the next assembly.
         M = self._B if self._B is not None else A
@@ -192,6 +220,8 @@ class WoundProblem:
             e += c.energy(self.solution())
             if self.tie is not None:
                 e += self.tie.energy(self.solution(), c.k_V_kPa)
+        if self.cables is not None:
+            e += self.cables.energy(self.solution())
         return e
 
     def min_det(self, u: np.ndarray) -> float:

@@ -23,6 +23,7 @@ from .closure import ClosureMeasures
 from .profiles import locate_cells
 
 if TYPE_CHECKING:
+    from .domain import WoundDomain
     from .model import WoundModel
 
 __all__ = [
@@ -30,8 +31,10 @@ __all__ = [
     "EDGE_POINTS",
     "SurfacePatch",
     "SutureState",
+    "bite_points",
     "measure_state",
     "surface_patch",
+    "wound_rim",
 ]
 
 EDGE_OFFSET_mm = 0.1
@@ -132,40 +135,74 @@ def measure_state(
 class SurfacePatch(NamedTuple):
     """The deformed skin surface around the wound, for a picture (mm)."""
 
-    points: np.ndarray  # (k, 3) deformed
-    triangles: np.ndarray  # (m, 3) into points
+    points: np.ndarray  # (k, 3) deformed nodes (P2: the edges' midpoint nodes too)
+    triangles: np.ndarray  # (m, 3) into points (P2: four flat triangles per facet)
     rise_mm: np.ndarray  # (k,) u_z above the far field
     sutures: np.ndarray  # (n, 2, 3) each suture's bites, deformed
+    outline: np.ndarray = np.zeros((0, 2, 3))  # (e, 2, 3) the wound's rim, deformed segments
+
+
+def wound_rim(domain: WoundDomain) -> np.ndarray:
+    """(e, 2) the edges (input point indices) where the top surface meets the wound's walls:
+    the excision's outline at the skin surface, both flanks."""
+    from ..core.schema import TOP, WOUND_TAGS
+
+    d = domain
+
+    def edges(tri: np.ndarray) -> np.ndarray:
+        e = np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]])
+        return np.unique(np.sort(e, axis=1), axis=0)
+
+    top = edges(d.facets[d.facet_tags == TOP])
+    wall = edges(d.facets[np.isin(d.facet_tags, WOUND_TAGS)])
+    n = len(d.points)
+    return top[np.isin(top[:, 0] * n + top[:, 1], wall[:, 0] * n + wall[:, 1])]
+
+
+def bite_points(
+    domain: WoundDomain, lens: Lens, suture_y_mm: np.ndarray, bite_width_mm: float
+) -> np.ndarray:
+    """(n, 2) per suture the top surface's input points nearest its two bites, ``bite_width_mm``
+    outside the wound's edge on either side at the suture's y (reference configuration)."""
+    d = domain
+    top = np.flatnonzero(np.abs(d.points[:, 2] - d.z_top) <= 1e-9 * d.ell)
+    out = []
+    for y in np.asarray(suture_y_mm, dtype=float):
+        half = lens.half_width(y)
+        for x in (lens.x_c - half - bite_width_mm, lens.x_c + half + bite_width_mm):
+            out.append(top[np.argmin(np.hypot(d.points[top, 0] - x, d.points[top, 1] - y))])
+    return np.asarray(out, dtype=np.int64).reshape(-1, 2)
 
 
 def surface_patch(
     model: WoundModel, lens: Lens, suture_y_mm: np.ndarray, bite_width_mm: float, reach: float = 0.8
 ) -> SurfacePatch:
     """The top surface's triangles within ``reach`` wound lengths of the wound's centre,
-    deformed, with their rise above the far field, and the sutures as segments between the
-    top nodes nearest their bites."""
+    deformed (through every node of the element: P2 facets split at their edges' midpoints),
+    with their rise above the far field, the sutures as segments between the top nodes
+    nearest their bites (`bite_points`) and the wound's rim (`wound_rim`)."""
     from ..core.schema import TOP
 
     d = model.domain
     u = model.displacement_input()
+    U = model.u.reshape(-1, 3)
     pts = d.points
     tri = d.facets[d.facet_tags == TOP]
     centre = np.array([lens.x_c, 0.0])
     near = np.all(np.abs(pts[tri][:, :, :2] - centre).max(axis=2) <= reach * 2 * lens.a, axis=1)
-    tri = tri[near]
-    used, inv = np.unique(tri, return_inverse=True)
-    xf = pts[used] + u[used]
+    sub = d.element.sub_triangles(d.input_node[tri[near]])
+    used, inv = np.unique(sub, return_inverse=True)
+    xf = d.X[used] + U[used]
     top = np.flatnonzero(np.abs(pts[:, 2] - d.z_top) <= 1e-9 * d.ell)
     tol = 1e-9 * d.ell
     x = pts[top, 0]
     far = top[(np.abs(x - x.min()) <= tol) | (np.abs(x - x.max()) <= tol)]
     ref = float(np.median(u[far, 2])) if len(far) else 0.0
-    segs = []
-    for y in np.asarray(suture_y_mm, dtype=float):
-        half = lens.half_width(y)
-        ends = []
-        for x in (lens.x_c - half - bite_width_mm, lens.x_c + half + bite_width_mm):
-            k = top[np.argmin(np.hypot(pts[top, 0] - x, pts[top, 1] - y))]
-            ends.append(pts[k] + u[k])
-        segs.append(ends)
-    return SurfacePatch(xf, inv.reshape(-1, 3), u[used, 2] - ref, np.array(segs).reshape(-1, 2, 3))
+    bites = bite_points(d, lens, suture_y_mm, bite_width_mm)
+    segs = (pts[bites] + u[bites]).reshape(-1, 2, 3)
+    rim = d.input_node[wound_rim(d)]
+    if d.element.degree == 2 and len(rim):  # each edge through its midpoint node
+        mid = d.element.midpoints(rim[:, 0], rim[:, 1])
+        rim = np.concatenate([np.c_[rim[:, 0], mid], np.c_[mid, rim[:, 1]]])
+    outline = (d.X + U)[rim].reshape(-1, 2, 3)
+    return SurfacePatch(xf, inv.reshape(-1, 3), U[used, 2] - ref, segs, outline)

@@ -35,7 +35,7 @@ from ..config.fusiform import Lens
 from ..config.paper import ClosureZone, StageSettings
 from ..config.solver import SolverSettings
 from ..config.sutures import ItchLoad, SuturePlan
-from ..contact import ZoneTie
+from ..contact import Cables, ZoneTie
 from ..core.schema import MeshData, StageStatus
 from ..solver.dirichlet import Dirichlet
 from .domain import WoundDomain, dof_rows
@@ -44,13 +44,59 @@ from .materials import JobMaterials
 from .model import WoundModel
 from .stages import contact_ramp, run_stage
 from .suture_measures import SurfacePatch, SutureState, measure_state, surface_patch
+from .thread import NYLON_4_0, ANCHOR_RADIUS_mm, SutureThread, needle_track, suture_loop
 
-__all__ = ["BLEND_mm", "SolveStep", "SuturedClosure"]
+__all__ = ["BLEND_mm", "NOT_APPOSED", "TIGHTEN_STEPS", "SolveStep", "SuturedClosure"]
 
 # A held wall point's pull counts for its nearest suture, blended linearly into the next one's
 # over this length about the point halfway between them (so the split of the load between
 # neighbours does not jump with the mesh's nodes, nor with rounding in a symmetric placement).
 BLEND_mm = 0.5
+
+
+# The status of a thread closure that converged but stayed wider than asked at a suture.
+NOT_APPOSED = "not-apposed"
+# At most this many tightenings of the threads toward apposition (`SuturedClosure.thread`).
+TIGHTEN_STEPS = 8
+# The gap's first-guess response to a loop's shortening (mm of gap per mm of loop): about
+# half, since two strands cross the wound and the bite's tissue gives way as the edges close.
+# Later steps use the measured responses (Broyden's update).
+GAP_PER_SHORTENING = 0.5
+# No tightening shortens a loop by more than this (mm) beyond the last.
+MAX_SHORTENING_STEP_mm = 2.0
+
+
+class Tightening:
+    """Each loop's shortening toward apposition at its own suture: the smallest shortenings
+    s_i >= 0 with the surface gap g_i at suture i at most the target, found by Broyden's
+    method on g(s) aimed a tenth below the target, from the diagonal response
+    -`GAP_PER_SHORTENING` (a suture's gap depends on its neighbours' knots too)."""
+
+    def __init__(self, n: int, target_mm: float) -> None:
+        self.target = float(target_mm)
+        self.aim = 0.9 * self.target
+        self.J = -GAP_PER_SHORTENING * np.eye(n)
+        self.last: tuple[np.ndarray, np.ndarray] | None = None
+
+    def done(self, gaps: np.ndarray) -> bool:
+        return bool(np.all(gaps <= self.target))
+
+    def step(self, s: np.ndarray, gaps: np.ndarray) -> np.ndarray:
+        """The next shortenings from the current ones ``s`` and their ``gaps``."""
+        if self.last is not None:
+            ds, dg = s - self.last[0], gaps - self.last[1]
+            if float(ds @ ds) > 0:
+                self.J += np.outer(dg - self.J @ ds, ds) / float(ds @ ds)
+        self.last = (s.copy(), gaps.copy())
+        # Loops untightened and already apposed stay as they are.
+        active = (s > 0) | (gaps > self.aim)
+        r = np.where(active, gaps - self.aim, 0.0)
+        try:
+            delta = -np.linalg.solve(self.J, r)
+        except np.linalg.LinAlgError:
+            delta = r / GAP_PER_SHORTENING
+        delta = np.clip(delta, -MAX_SHORTENING_STEP_mm, MAX_SHORTENING_STEP_mm)
+        return np.maximum(s + np.where(active, delta, 0.0), 0.0)
 
 
 class SolveStep(NamedTuple):
@@ -86,6 +132,11 @@ class SuturedClosure:
         self.dirichlet_force_mN: np.ndarray | None = None
         self._shares: np.ndarray | None = None  # (tie pairs, sutures): `shares`
         self.orientation_deg = 0.0
+        self.zone_depth_fraction = float(zone_depth_fraction)
+        self.closed_r: np.ndarray | None = None  # the stage-2 residual: its reactions
+        self.cables: Cables | None = None
+        self.tracks_mm: np.ndarray = np.zeros((0, 2, 2, 3))  # (suture, flank, entry/exit, xyz)
+        self.shortening_mm = np.zeros(0)  # per loop: how much shorter than at apposition, mm
 
     @property
     def domain(self) -> WoundDomain:
@@ -104,6 +155,7 @@ class SuturedClosure:
             if not ok:
                 return out
         self.closed_u = self.model.u.copy()
+        self.closed_r = self.model.problem.residual_array()
         return out
 
     # -- sutures --------------------------------------------------------------------------
@@ -156,6 +208,7 @@ class SuturedClosure:
             raise RuntimeError("close() first")
         t0 = time.perf_counter()
         m, d = self.model, self.domain
+        self._detach_threads()
         ys = tuple(plan.positions(2 * self.lens.a) if ys is None else ys)
         held = self.footprints(ys, plan.bite_width_mm)
         left = held[d.X[held, 0] < d.x_c]
@@ -191,10 +244,122 @@ class SuturedClosure:
         state = self._measure() if ok else None
         return SolveStep(res.status, its, time.perf_counter() - t0, state)
 
+    # -- threads --------------------------------------------------------------------------
+
+    @property
+    def bite_depth_mm(self) -> float:
+        """The bite depth: the closure zone's (mm)."""
+        return self.zone_depth_fraction * self.lens.d
+
+    def _detach_threads(self) -> None:
+        self.cables = None
+        self.model.attach_cables(None)
+
+    def thread(
+        self,
+        plan: SuturePlan,
+        ys: Sequence[float] | None = None,
+        material: SutureThread = NYLON_4_0,
+        radius_mm: float = ANCHOR_RADIUS_mm,
+        apposed_gap_mm: float | None = None,
+    ) -> SolveStep:
+        """Close the wound by threads from the stage-2 state (module docstring): every loop
+        tied at its length there, the zone's Dirichlet condition released while the flank
+        contact is ramped in; then, with ``apposed_gap_mm``, each loop shortened until the
+        surface gap at its suture is at most that (`Tightening`; `TIGHTEN_STEPS` at most, the
+        status `NOT_APPOSED` if a gap stays wider)."""
+        if self.closed_u is None:
+            raise RuntimeError("close() first")
+        if self.model.tie is not None:
+            raise RuntimeError("threads on a model whose footprints are tied: a new SuturedClosure")
+        t0 = time.perf_counter()
+        m, d = self.model, self.domain
+        ys = tuple(plan.positions(2 * self.lens.a) if ys is None else ys)
+        tracks = np.array(
+            [
+                needle_track(d, self.lens.half_width(float(y)), float(y), plan.bite_width_mm,
+                             self.bite_depth_mm)
+                for y in ys
+            ]
+        )  # fmt: skip
+        cables = Cables(d.X, [suture_loop(d, t, radius_mm) for t in tracks], material.EA_mN)
+        self.cables, self.tracks_mm, self.positions_mm = cables, tracks, ys
+        self._shares = None
+        m.attach_cables(cables)
+        res = self._tie_from_closed(np.zeros(len(ys)))
+        its = int(res.iterations)
+        status: str = res.status
+        rule = None if apposed_gap_mm is None else Tightening(len(ys), apposed_gap_mm)
+        tightenings = 0
+        while status == StageStatus.CONVERGED and rule is not None:
+            gaps = self.gaps_at_sutures()
+            if rule.done(gaps):
+                break
+            if tightenings == TIGHTEN_STEPS:
+                status = NOT_APPOSED
+                break
+            res = self._tie_from_closed(rule.step(self.shortening_mm, gaps))
+            tightenings += 1
+            its += int(res.iterations)
+            status = res.status
+        ok = status in (StageStatus.CONVERGED, NOT_APPOSED)
+        self.sutured_u = m.u.copy() if ok else None
+        state = self._measure() if ok else None
+        return SolveStep(status, its, time.perf_counter() - t0, state)
+
+    def _tie_from_closed(self, shortening_mm: np.ndarray) -> Any:
+        """From the stage-2 state: each loop tied ``shortening_mm`` shorter than its length
+        there, the zone's condition released and the contact ramped in (as stage 4); the
+        continuation's result. Every tightening starts from the apposed state, since the
+        contact that a tightened wound engages is brought in by the ramp."""
+        m, d = self.model, self.domain
+        assert self.cables is not None and self.closed_u is not None
+        m.u[:] = self.closed_u
+        self.cables.tie(m.u, shortening_mm)
+        self.shortening_mm = np.asarray(shortening_mm, dtype=float).copy()
+        step = LoadStep(
+            "thread-tie",
+            (Dirichlet(d.gauge_rows()),),
+            self.closed_u,
+            penalty=contact_ramp(m.contact_penalty_kPa[0]),
+            solve=Solve.CONTACT,
+        )
+        return run_load_step(m, step).solve
+
+    def gaps_at_sutures(self) -> np.ndarray:
+        """The surface gap at each suture's y in the current state (mm)."""
+        line = self.model.closure_line
+        assert line is not None
+        pairs = line.surface
+        x = self.domain.X[:, 0] + self.model.u.reshape(-1, 3)[:, 0]
+        y = self.domain.X[pairs[:, 0], 1]
+        order = np.argsort(y)
+        gap = (x[pairs[:, 1]] - x[pairs[:, 0]])[order]
+        return np.interp(np.asarray(self.positions_mm, float), y[order], gap)
+
+    def apposition_forces(self, ys: Sequence[float]) -> np.ndarray:
+        """Per suture at ``ys``, the stage-2 Dirichlet closure's pull on the left wall over the
+        stretch of wound it holds (the wall's nodes counted by `shares`; mN): the force that
+        apposes the edges there, which the suture replaces."""
+        if self.closed_r is None:
+            raise RuntimeError("close() first")
+        left = self.domain.zone_left_nodes
+        return self.closed_r[3 * left] @ self.shares(self.domain.X[left, 1], ys)
+
+    def thread_pull(self) -> np.ndarray:
+        """Per suture, the x-force its thread exerts on the left flank (mN, toward the wound;
+        about twice the tension: two strands cross)."""
+        if self.cables is None:
+            return np.zeros(len(self.positions_mm))
+        forces = self.cables.anchor_forces(self.model.u)
+        return np.array([-f[: len(f) // 2, 0].sum() for f in forces])
+
     def suture_forces(self) -> np.ndarray:
         """Per suture, the tie's pull across the wound on its left footprint (mN; positive
         holds the walls together)."""
         m = self.model
+        if self.cables is not None:
+            return self.cables.tensions(m.u)
         if self._shares is None or m.tie is None or m.contact is None or not m.tie.active:
             return np.zeros(len(self.positions_mm))
         f = m.tie.force_vector(m.u, m.contact.k_V_kPa)

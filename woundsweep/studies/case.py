@@ -17,13 +17,14 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 
 from ..config.case import (
     MESH_CHECK_FACTOR,
     ClinicalCase,
+    OPEN_GAP_mm,
     SCAN_TO_WOUND_deg,
     line_angle,
 )
@@ -35,6 +36,7 @@ from ..core.schema import ExitCode, StageStatus
 from ..physics.materials import JobMaterials
 from ..physics.suture_measures import SurfacePatch, SutureState
 from ..physics.sutures import SolveStep, SuturedClosure
+from .case_view import CaseView, ViewState, capture_state, case_view
 
 __all__ = [
     "CONVERGE_RATIO",
@@ -46,8 +48,10 @@ __all__ = [
     "Cost",
     "LoadRun",
     "MeshLevel",
+    "ThreadRun",
     "even_positions",
     "run_case",
+    "run_threads",
 ]
 
 EVEN_ROUNDS = 2
@@ -104,6 +108,20 @@ class Cost(NamedTuple):
     time_s: float
 
 
+class ThreadRun(NamedTuple):
+    """The case closed by threads (`SuturedClosure.thread`), each knot tightened until the
+    edges meet under it, and the case's load after closure on it."""
+
+    status: str  # "converged", or `NOT_APPOSED` if a knot could not appose its edges
+    sutured: SutureState  # suture_force_mN: each thread's tension
+    pull_mN: np.ndarray  # each thread's pull on a flank toward the wound (about 2 T)
+    apposition_mN: np.ndarray  # the stage-2 Dirichlet pull over each suture's stretch
+    shortening_mm: np.ndarray  # how much shorter than at apposition each loop is tied
+    gap_at_suture_mm: np.ndarray
+    loaded: LoadRun
+    solves: int
+
+
 class CaseResult(NamedTuple):
     case: ClinicalCase
     dofs: int
@@ -121,6 +139,8 @@ class CaseResult(NamedTuple):
     scan: list[LoadRun] = []  # the other directions of the load (empty without the scan)
     mesh_check: MeshLevel | None = None  # h at least halved (None: skipped)
     costs: dict[str, Cost] = {}
+    view: CaseView | None = None  # the fields of view.html (`run_case(view=True)`)
+    threads: ThreadRun | None = None  # the closure by threads (`run_case(threads=True)`)
 
     @property
     def loaded(self) -> LoadRun:
@@ -159,11 +179,15 @@ def run_case(
     band: bool = True,
     scan: bool = True,
     mesh_check: bool = True,
+    view: bool = False,
+    threads: bool = False,
 ) -> CaseResult:
     """Solve ``case`` (module docstring); with ``band`` also the site's other skin types, with
     ``scan`` the load along `SCAN_TO_WOUND_deg`, with ``mesh_check`` the sutures on a mesh
     `MESH_CHECK_FACTOR` times finer, with ``converge`` on two finer meshes
-    (`CONVERGE_RATIO`); CaseNotSolved if a solve does not converge."""
+    (`CONVERGE_RATIO`), with ``view`` the sutured state's fields (and the load's end's) for
+    view.html (`case_view`), with ``threads`` the closure by threads (`run_threads`);
+    CaseNotSolved if a solve does not converge."""
     from ..mesh.build import build_mesh
 
     t0 = time.perf_counter()
@@ -221,7 +245,11 @@ def run_case(
     closed, closing = close(case.angle_deg, case.skin_type)
     sutured = suture(None, "sutures")
     surface = sc.surface(case.sutures.bite_width_mm)
+    seen: list[ViewState] = [capture_state(sc, "sutured")] if view else []
     itch = load(case.itch_to_wound_deg, ITCH_STEPS).steps
+    if view and len(itch) == ITCH_STEPS and itch[-1].state is not None:
+        seen.append(capture_state(sc, "at the end of the load after closure"))
+    shown = case_view(sc, case.sutures.bite_width_mm, seen) if view else None
     t = timed("case", 3 + ITCH_STEPS, t0)
     scanned: list[LoadRun] = []
     if scan:
@@ -262,6 +290,10 @@ def run_case(
         _, along_force = close(0.0, case.skin_type)
         along = suture(None, "sutures")
         t = timed("compare", 3, t)
+    threaded = None
+    if threads:
+        threaded = run_threads(case, mesh, spec.lens(), echo)
+        t = timed("threads", threaded.solves, t)
     check = None
     if mesh_check:
         check = _level(case, min(MESH_CHECK_FACTOR * case.mesh_size_factor, FINEST_FACTOR), echo)
@@ -279,7 +311,40 @@ def run_case(
         timed("converge", 3 * (len(levels) - 1), t)
     return CaseResult(
         case, sc.domain.n_dofs, closing, closed, sutured, itch, evened, along, along_force,
-        time.perf_counter() - t0, levels, surface, ends, scanned, check, costs,
+        time.perf_counter() - t0, levels, surface, ends, scanned, check, costs, shown, threaded,
+    )  # fmt: skip
+
+
+def run_threads(case: ClinicalCase, mesh: Any, lens: Any, echo: Callable[[str], None]) -> ThreadRun:
+    """The case's wound closed by threads on ``mesh`` (a model of its own: the footprints'
+    tie and the threads do not share one), each knot tightened until the surface gap under it
+    is at most `OPEN_GAP_mm`, then the case's load after closure."""
+    sc = SuturedClosure(
+        mesh, lens, case.zone_depth_fraction, SolverSettings(element_degree=case.element_degree)
+    )
+    echo("threads: the wound closed again, by 4-0 nylon threads")
+    steps = sc.close(
+        JobMaterials.table2(case.skin_type, case.orientation_deg), case.orientation_deg
+    )
+    if steps[-1].status != StageStatus.CONVERGED or len(steps) < 2:
+        raise CaseNotSolved(f"threads: stage {len(steps)} {steps[-1].status}")
+    ys = case.sutures.positions(case.length_mm)
+    appose = sc.apposition_forces(ys)
+    st = sc.thread(case.sutures, apposed_gap_mm=OPEN_GAP_mm)
+    echo(
+        f"  tied and tightened: {st.status} ({st.newton_iterations} Newton steps, {st.time_s:.1f} s)"
+    )
+    if st.state is None:
+        raise CaseNotSolved(f"threads: {st.status}")
+    pull, gaps, short = sc.thread_pull(), sc.gaps_at_sutures(), sc.shortening_mm.copy()
+    load = case.load_at(case.itch_to_wound_deg)
+    done = sc.itch(load, ITCH_STEPS)
+    for j, step in enumerate(done, 1):
+        echo(f"  load {j}/{ITCH_STEPS}: {step.status} ({step.newton_iterations} Newton steps)")
+    solves = 2 + len(done) + 1
+    return ThreadRun(
+        st.status, st.state, pull, appose, short, gaps,
+        LoadRun(load, case.to_wound_deg(load), done), solves,
     )  # fmt: skip
 
 

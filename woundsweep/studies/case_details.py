@@ -152,4 +152,12 @@ def details(result: CaseResult) -> list[str]:
 
 def limits(result: CaseResult) -> list[str]:
     """The report's "Limits of the model" bullets."""
-    return [*_LIMITS, _resolution(result)]
+    threads = (
+        ["- **Threads.** The threads (Sutures as threads) pull through the tissue around their "
+         "needle tracks; the needle's hole, the knot's geometry and friction in the tracks and "
+         "between the walls are not modelled, and a knot is tightened only until the edges "
+         "under it meet."]
+        if result.threads is not None
+        else []
+    )  # fmt: skip
+    return [*_LIMITS, *threads, _resolution(result)]

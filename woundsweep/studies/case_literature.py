@@ -176,6 +176,14 @@ def literature_section(result: CaseResult) -> list[str]:
         f"| this case | FE, held footprints (apposition force) | {c.length_mm:g} x {c.width:.3g} "
         f"| {o.smallest_N:.3g}-{o.peak_N:.3g}{band} | {ratio} |",
     ]
+    if result.threads is not None:
+        T = result.threads.sutured.suture_force_mN / 1e3
+        ends = (T[0] + T[-1]) / 2
+        tr_ratio = f"{T.max() / ends:.1f}" if len(T) >= 3 else "n/a (fewer than 3)"
+        lines.append(
+            f"| this case | FE, threads tightened until the edges meet (tension) "
+            f"| {c.length_mm:g} x {c.width:.3g} | {T.min():.3g}-{T.max():.3g} | {tr_ratio} |"
+        )
     lines += [
         f"| {r.source} | {r.method} | {r.wound_mm} | {r.force_N} | {r.centre_to_end} |"
         for r in REPORTED

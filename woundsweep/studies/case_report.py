@@ -1,6 +1,7 @@
 """The report of one clinical case (`woundsweep case`): report.md (its text: `case_text`),
-case.json (the report's numbers) and the figures (`case_figures`; ``view.png`` here: the
-sutured skin surface around the wound in 3D, the sutures drawn).
+case.json (the report's numbers) and the figures (`case_figures`; ``view.png``:
+`case_view.view_png`, the sutured skin surface around the wound in 3D, its rim and the
+threads drawn).
 """
 
 from __future__ import annotations
@@ -18,44 +19,11 @@ from .case import CaseResult, best_evened
 from .case_details import mesh_change
 from .case_figures import forces_png, wound_png
 from .case_text import render
+from .case_threads import threads_summary
 from .case_verdict import Verdict, verdict
+from .case_view import view_png
 
-__all__ = ["VIEW_Z_SCALE", "write_report"]
-
-VIEW_Z_SCALE = 3.0
-
-
-def _view(result: CaseResult, out: Path) -> str:
-    """``view.png``: the sutured skin surface around the wound in 3D, coloured by its rise
-    above the far field (the dog-ears at the apices), the sutures drawn between their bites;
-    heights exaggerated `VIEW_Z_SCALE` times."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    from matplotlib.figure import Figure
-
-    sp = result.surface
-    p = sp.points
-    fig = Figure(figsize=(8, 6), layout="constrained")
-    ax = fig.add_subplot(projection="3d")
-    tri = ax.plot_trisurf(
-        p[:, 0], p[:, 1], p[:, 2], triangles=sp.triangles, cmap="viridis", linewidth=0.1,
-        edgecolor=(0, 0, 0, 0.15), antialiased=True,
-    )  # fmt: skip
-    tri.set_array(sp.rise_mm[sp.triangles].mean(axis=1))
-    tri.autoscale()
-    for a, b in sp.sutures:
-        ax.plot(*np.stack([a, b]).T, color="red", lw=3, zorder=10)
-    span = np.ptp(p[:, :2], axis=0)
-    ax.set_box_aspect((span[0], span[1], VIEW_Z_SCALE * max(float(np.ptp(p[:, 2])), 1e-3)))
-    ax.set_xlabel("x (mm)")
-    ax.set_ylabel("y (mm)")
-    ax.set_zlabel("z (mm)")
-    ax.view_init(elev=30, azim=-65)
-    fig.colorbar(tri, ax=ax, shrink=0.6, label="rise above the far field (mm)")
-    ax.set_title(f"sutured (red), heights x{VIEW_Z_SCALE:g}", fontsize=9)
-    atomic_write(out / "view.png", lambda tmp: fig.savefig(tmp, dpi=110, format="png"))
-    return "view.png"
+__all__ = ["write_report"]
 
 
 def _state(st: SutureState) -> dict[str, Any]:
@@ -87,6 +55,7 @@ def _summary(result: CaseResult, v: Verdict) -> dict[str, Any]:
         "costs": {k: {"solves": x.solves, "time_s": x.time_s} for k, x in result.costs.items()},
         "closing_force_mN": result.closing_force_mN,
         **_state(st),
+        **threads_summary(result),
         "open_gap_mm": v.threshold_mm,
         "open_after_closure": [list(s) for s in v.after_closure],
         "load": {
@@ -147,13 +116,20 @@ def _summary(result: CaseResult, v: Verdict) -> dict[str, Any]:
     return out
 
 
-def write_report(result: CaseResult, out: Path, command: str) -> Path:
-    """Write report.md, case.json and the figures into ``out``; return report.md's path."""
+def _view_title(result: CaseResult) -> str:
+    c = result.case
+    return f"{c.length_mm:g} x {c.width:.3g} mm excision at {c.angle_deg:g} deg to the Langer line"
+
+
+def write_report(result: CaseResult, out: Path, command: str, pages: tuple[str, ...] = ()) -> Path:
+    """Write report.md, case.json and the figures into ``out``; return report.md's path.
+    ``pages``: files beside them the report links to (``view.html``)."""
     out.mkdir(parents=True, exist_ok=True)
     v = verdict(result)
     summary = _summary(result, v)
     atomic_write(out / "case.json", lambda tmp: Path(tmp).write_text(json.dumps(summary, indent=1)))
-    figs = [forces_png(result, out), wound_png(result, out), _view(result, out)]
+    figs = [forces_png(result, out), wound_png(result, out),
+            view_png(result.surface, out, _view_title(result)), *pages]  # fmt: skip
     text = render(result, command, figs, v)
     path = out / "report.md"
     atomic_write(path, lambda tmp: Path(tmp).write_text(text))

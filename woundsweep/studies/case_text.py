@@ -21,6 +21,7 @@ from .case_literature import (
     literature_section,
     ours,
 )
+from .case_threads import threads_section
 from .case_verdict import LoadVerdict, Verdict, carry_least, carry_most, verdict
 
 __all__ = ["render"]
@@ -306,6 +307,11 @@ def _load_section(result: CaseResult, v: Verdict) -> list[str]:
     return lines
 
 
+def _page_link(name: str) -> str:
+    """A page beside the figures (``view.html``, `woundsweep case --view`)."""
+    return f"[{name}]({name}): the sutured wound in 3D, interactive (opens in a browser offline)"
+
+
 def render(result: CaseResult, command: str, figures: list[str], v: Verdict | None = None) -> str:
     """report.md's text (module docstring)."""
     v = verdict(result) if v is None else v
@@ -340,6 +346,8 @@ def render(result: CaseResult, command: str, figures: list[str], v: Verdict | No
         "",
         *_load_section(result, v),
         "",
+        *threads_section(result),
+        *([""] if result.threads is not None else []),
         "## Against the literature",
         "",
         *literature_section(result),
@@ -352,7 +360,7 @@ def render(result: CaseResult, command: str, figures: list[str], v: Verdict | No
         "",
         "## Figures",
         "",
-        *[f"![{f}]({f})" for f in figures],
+        *[f"![{f}]({f})" if f.endswith(".png") else _page_link(f) for f in figures],
         "",
         "## Model details",
         "",

@@ -24,7 +24,7 @@ import math
 from collections.abc import Callable
 from typing import Any
 
-from . import closures, contact_cases, objectivity, slit
+from . import closures, contact_cases, objectivity, slit, threads
 from .mms import MmsSeries, MmsSpec, run_series
 
 __all__ = ["CASES", "CLOSURE_CASES", "Case", "Outcome", "mms_series", "select"]
@@ -202,6 +202,22 @@ def _slit_cases() -> list[Case]:
     return out
 
 
+@functools.cache
+def _slit_threads() -> threads.SlitThreads:
+    return threads.slit_threads(2, degree=1, grid=4)
+
+
+def _thread_cases() -> list[Case]:
+    def balance() -> float:
+        r = _slit_threads()
+        return (r.total_pull_mN + r.pin_transfer_mN) / r.expected_total_mN
+
+    return [
+        Case("slit-threads-force", "slit closed by 2 threads, P1: sum of 2 T (and what the gauge "
+             "pins pass) over sum P_xx t L", 1.0, 1e-5, balance, unit="ratio"),
+    ]  # fmt: skip
+
+
 _SLIT: dict[int, slit.SlitResult] = {}
 
 
@@ -253,7 +269,7 @@ SHRINK_DEGREE, SHRINK_N_THETA = 2, 32  # 4 elements across each tube
 
 def all_cases() -> list[Case]:
     """Every case, in the table's order."""
-    cases = _mms_cases() + _slit_cases()
+    cases = _mms_cases() + _slit_cases() + _thread_cases()
     for make in CLOSURE_CASES.values():
         cases += make()
     return cases + _other_cases()

@@ -2,17 +2,20 @@
 stress (kPa), one entry per requested stage, the closure zone outlined and the maximum marked.
 
 `view_data` turns a `JobFields` into the viewer's data (arrays as base64 little-endian
-float32 / int32, decoded by ``assets/viewer.js``); `job_body` is the HTML of a job (view,
-stage table, parameters) shared by ``woundsweep view`` and the atlas' job pages; `view_page`
-is the self-contained page of ``woundsweep view`` (plotly.js and the viewer inlined).
+float32 / int32, decoded by ``assets/viewer.js``), optionally with extra lines per stage
+(`LineTrace`: threads, outlines; they move with the deformation scale); `job_body` is the HTML
+of a job (view, stage table, parameters) shared by ``woundsweep view`` and the atlas' job
+pages; `view_page` is the self-contained page of ``woundsweep view`` (plotly.js and the viewer
+inlined), `fields_page` the same view of fields that are no job's (``woundsweep case --view``).
 """
 
 from __future__ import annotations
 
 import base64
 import math
+from collections.abc import Mapping, Sequence
 from html import escape
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -34,7 +37,21 @@ from .html import (
 from .jobdata import JobFields, StageNote, records
 from .surface import max_cell_point, plane_slice, surface_of, zone_outline
 
-__all__ = ["job_body", "stage_rows", "view_data", "view_page"]
+__all__ = ["LineTrace", "fields_page", "job_body", "stage_rows", "view_data", "view_page"]
+
+
+class LineTrace(NamedTuple):
+    """An extra line of the 3D view: polylines in the reference configuration (mm; a NaN row
+    ends one and starts the next), each point moved by its ``displacement`` times the view's
+    deformation scale. Traces of one ``group`` share one legend entry; ``name`` is the hover
+    text."""
+
+    name: str
+    points: np.ndarray  # (p, 3) reference mm
+    displacement: np.ndarray  # (p, 3) mm
+    color: str = "black"
+    width: float = 4.0
+    group: str = ""
 
 
 def _b64(a: np.ndarray, dtype: str) -> str:
@@ -76,9 +93,39 @@ def _profile_lines(jf: JobFields, k: int) -> list[dict[str, Any]]:
     return out
 
 
-def view_data(jf: JobFields) -> dict[str, Any]:
+def _coords(a: np.ndarray) -> list[float | None]:
+    return [None if not math.isfinite(v) else round(float(v), 5) for v in np.asarray(a, float)]
+
+
+def _trace(t: LineTrace) -> dict[str, Any]:
+    """A `LineTrace` as the viewer reads it: coordinates and displacements as lists, null
+    where a line breaks."""
+    p, u = np.asarray(t.points, float), np.asarray(t.displacement, float)
+    if p.shape != u.shape or p.ndim != 2 or p.shape[1] != 3:
+        raise ValueError(f"trace {t.name!r}: points {p.shape} and displacement {u.shape}")
+    u = np.where(np.isfinite(p), u, np.nan)
+    axes = {c: _coords(p[:, i]) for i, c in enumerate("xyz")}
+    moves = {f"u{c}": _coords(u[:, i]) for i, c in enumerate("xyz")}
+    return {"name": t.name, "group": t.group, "color": t.color, "width": t.width,
+            **axes, **moves}  # fmt: skip
+
+
+def view_data(
+    jf: JobFields,
+    traces: Mapping[int, Sequence[LineTrace]] | None = None,
+    labels: Mapping[int, str] | None = None,
+    title: str | None = None,
+    initial: int | None = None,
+    camera: dict[str, Any] | None = None,
+) -> dict[str, Any]:
     """The viewer's data: the surface and the mid-section cut once, then per requested stage
-    its fields (surface, cut, profile lines) or a reason."""
+    its fields (surface, cut, profile lines) or a reason. ``traces``: extra lines per stage;
+    ``labels``: the stages' names in the selector (default "stage k: ..."); ``title``: the
+    plot's title before the stage's name (default "job N"); ``initial``: the stage shown
+    first (default the last stored); ``camera``: plotly's scene camera at first (default an
+    oblique view of the whole patch)."""
+    traces = traces or {}
+    labels = labels or {}
     s = surface_of(jf.points, jf.cells, jf.facets, jf.zone)
     ref = jf.points[s.nodes]
     lo, hi = jf.points.min(axis=0), jf.points.max(axis=0)
@@ -93,7 +140,7 @@ def view_data(jf: JobFields) -> dict[str, Any]:
         k = note.stage
         entry: dict[str, Any] = {
             "stage": k,
-            "label": f"stage {k}: {STAGE_NAMES.get(k, '')}",
+            "label": labels.get(k, f"stage {k}: {STAGE_NAMES.get(k, '')}"),
             "status": note.status,
             "stored": note.stored,
             "reason": note.reason,
@@ -111,6 +158,7 @@ def view_data(jf: JobFields) -> dict[str, Any]:
                 cut_vm=_b64(np.asarray(vm, np.float64)[cut.owner], "<f4"),
                 lines=_profile_lines(jf, k),
                 closure=_closure_lines(jf, k),
+                traces=[_trace(t) for t in traces.get(k, ())],
                 surface_max_kPa=float(np.nanmax(tri_vm)),
                 **{CELL_MEAN_MAX: float(vm[cell])},
                 max={
@@ -144,6 +192,9 @@ def view_data(jf: JobFields) -> dict[str, Any]:
             "n_triangles": int(len(cut.triangles)),
         },
         "stages": stages,
+        "title": title,
+        "initial": initial,
+        "camera": camera,
     }
 
 
@@ -188,32 +239,7 @@ def job_body(
     )
     notes = jf.notes if jf is not None else None
     if jf is not None:
-        view = (
-            '<div class="controls"><label>stage <select id="stage"></select></label>'
-            '<label>deformation &times; <input type="number" id="scale" value="1" min="0" '
-            'max="20" step="0.5"></label>'
-            '<label><input type="checkbox" id="cut"> cut at the wound\'s mid-section</label>'
-            '<label><input type="checkbox" id="fullrange"> colour scale to the maximum</label>'
-            '<label><input type="checkbox" id="seethrough"> see-through surface</label>'
-            '<span id="note"></span></div>\n'
-            '<div class="views"><div id="plot"></div>'
-            '<div class="side"><div id="lines"></div><div id="closure"></div></div></div>\n'
-            '<p class="legend">Left: the deformed exterior surface (displacement times the '
-            "deformation scale), each triangle coloured by the von Mises stress of the "
-            "tetrahedron it bounds (its cell mean); the colour scale ends at the stage's p99 "
-            "of the volume and the cells above it are shaded from pale to deep magenta up to "
-            "the largest cell mean (the colour bar's top band); the cut shows the half y &ge; "
-            "the wound's mid-section and the cut face; black outline: the closure zone; red "
-            "diamond: the cell of the largest cell mean (deformed midpoint). Right: von Mises "
-            "along the stored profile lines (reference configuration); below it the closing "
-            "force per unit length along the wound (the load that holds the sutured zone shut: "
-            "where the sutures work hardest) and the flanks' contact force per unit length. "
-            "Lengths in mm, stresses in kPa, line loads in mN/mm. The stage's three von Mises "
-            "numbers: "
-            + "; ".join(escape(text) for text in STRESS_LABELS.values())
-            + ".</p>\n"
-            + json_script("wsdata", view_data(jf))
-        )
+        view = _view_block(view_data(jf), _JOB_LEGEND)
     else:
         view = f'<p class="noview">{escape(view_note)}</p>\n'
     return (
@@ -229,8 +255,68 @@ def job_body(
     )
 
 
+def _view_block(data: dict[str, Any], legend: str) -> str:
+    """The view's controls, plot, side plots, ``legend`` (HTML) and data (``#wsdata``)."""
+    return (
+        '<div class="controls"><label>stage <select id="stage"></select></label>'
+        '<label>deformation &times; <input type="number" id="scale" value="1" min="0" '
+        'max="20" step="0.5"></label>'
+        '<label><input type="checkbox" id="cut"> cut at the wound\'s mid-section</label>'
+        '<label><input type="checkbox" id="fullrange"> colour scale to the maximum</label>'
+        '<label><input type="checkbox" id="seethrough"> see-through surface</label>'
+        '<span id="note"></span></div>\n'
+        '<div class="views"><div id="plot"></div>'
+        '<div class="side"><div id="lines"></div><div id="closure"></div></div></div>\n'
+        + f'<p class="legend">{legend}</p>\n'
+        + json_script("wsdata", data)
+    )
+
+
+_JOB_LEGEND = (
+    "Left: the deformed exterior surface (displacement times the "
+    "deformation scale), each triangle coloured by the von Mises stress of the "
+    "tetrahedron it bounds (its cell mean); the colour scale ends at the stage's p99 "
+    "of the volume and the cells above it are shaded from pale to deep magenta up to "
+    "the largest cell mean (the colour bar's top band); the cut shows the half y &ge; "
+    "the wound's mid-section and the cut face; black outline: the closure zone; red "
+    "diamond: the cell of the largest cell mean (deformed midpoint). Right: von Mises "
+    "along the stored profile lines (reference configuration); below it the closing "
+    "force per unit length along the wound (the load that holds the sutured zone shut: "
+    "where the sutures work hardest) and the flanks' contact force per unit length. "
+    "Lengths in mm, stresses in kPa, line loads in mN/mm. The stage's three von Mises "
+    "numbers: " + "; ".join(escape(text) for text in STRESS_LABELS.values()) + "."
+)
+
+
 def view_page(jf: JobFields) -> str:
     """The self-contained HTML of ``woundsweep view``: no network needed to open it."""
     body = job_body(jf.job, jf.rows, jf) + f"<script>\n{asset('viewer.js')}</script>\n"
     head = f"<script>\n{plotly_js()}\n</script>\n"
     return page(f"woundsweep job {int(jf.job['job_index'])}", body, head)
+
+
+def fields_page(
+    jf: JobFields,
+    title: str,
+    *,
+    traces: Mapping[int, Sequence[LineTrace]] | None = None,
+    labels: Mapping[int, str] | None = None,
+    legend: str = "",
+    before: str = "",
+    after: str = "",
+    initial: int | None = None,
+    camera: dict[str, Any] | None = None,
+) -> str:
+    """A self-contained page of the 3D view of ``jf`` (`view_data` with ``traces``,
+    ``labels``, ``initial`` and ``camera``; the plot titled by the stage's label) without a
+    job's tables: ``title`` (text) as heading, ``before`` and ``after`` (HTML) around the
+    view, ``legend`` (HTML) under it."""
+    data = view_data(jf, traces, labels, "", initial, camera)
+    body = (
+        f"<h1>{escape(title)}</h1>\n"
+        + before
+        + _view_block(data, legend)
+        + after
+        + f"<script>\n{asset('viewer.js')}</script>\n"
+    )
+    return page(title, body, f"<script>\n{plotly_js()}\n</script>\n")

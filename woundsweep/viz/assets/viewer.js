@@ -1,7 +1,8 @@
 // woundsweep 3D view: reads the JSON in #wsdata (see woundsweep/viz/view.py) and draws the
 // deformed surface with plotly.js (Mesh3d, one colour per triangle), optionally cut at the
-// wound's mid-section, the closure zone's outline, the maximum's marker, and beside it the
-// von Mises along the stored profile lines; the controls redraw with Plotly.react.
+// wound's mid-section, the closure zone's outline, the stage's extra lines (`traces`:
+// threads, outlines, moved with the deformation scale), the maximum's marker, and beside it
+// the von Mises along the stored profile lines; the controls redraw with Plotly.react.
 (function () {
   "use strict";
   var el = document.getElementById("wsdata");
@@ -73,6 +74,36 @@
              line: { color: "black", width: 5 }, hoverinfo: "name" };
   }
 
+  // A stage's extra lines: reference points plus k times their displacement, pieces between
+  // nulls; with the cut a piece wholly on the cut-away side (y < the cut's) is left out. One
+  // legend entry per group, the trace's name on hover.
+  function extraLines(s, k, cut) {
+    var seen = {};
+    return (s.traces || []).map(function (t) {
+      var x = [], y = [], z = [], piece = [], keep = false;
+      function flush() {
+        if (piece.length && (!cut || keep)) {
+          piece.forEach(function (i) {
+            x.push(t.x[i] + k * t.ux[i]); y.push(t.y[i] + k * t.uy[i]); z.push(t.z[i] + k * t.uz[i]);
+          });
+          x.push(null); y.push(null); z.push(null);
+        }
+        piece = []; keep = false;
+      }
+      for (var i = 0; i < t.x.length; i++) {
+        if (t.x[i] === null) { flush(); continue; }
+        piece.push(i);
+        if (t.y[i] >= C.y_mm) { keep = true; }
+      }
+      flush();
+      var group = t.group || t.name, first = x.length > 0 && !seen[group];
+      if (first) { seen[group] = true; }
+      return { type: "scatter3d", mode: "lines", x: x, y: y, z: z, name: group,
+               legendgroup: group, showlegend: first, text: t.name, hoverinfo: "text",
+               line: { color: t.color, width: t.width } };
+    });
+  }
+
   // The colour scale: Viridis up to `top`, then a band of shades of magenta for the values
   // above it, [top, max] mapped linearly onto [top, 1.15 top] (`shade`).
   function colours(top, max) {
@@ -140,16 +171,17 @@
       text: ["largest cell mean " + m.value_kPa.toPrecision(4) + " kPa"],
       marker: { symbol: "diamond", size: 5, color: "red" }, hoverinfo: "text"
     };
+    var head = D.title === null || D.title === undefined ? "job " + D.job_index : D.title;
     var layout = {
       margin: { l: 0, r: 0, t: 30, b: 0 }, showlegend: true, legend: { x: 0, y: 1 },
-      title: { text: "job " + D.job_index + ", " + s.label + (D.element ? " (" + D.element + ")" : ""),
+      title: { text: (head ? head + ", " : "") + s.label + (D.element ? " (" + D.element + ")" : ""),
                font: { size: 14 }, x: 0.01, xanchor: "left" },
       uirevision: "keep-camera",
       scene: { aspectmode: "data", xaxis: { title: { text: "x (mm)" } },
                yaxis: { title: { text: "y (mm)" } }, zaxis: { title: { text: "z (mm)" } },
-               camera: { eye: { x: 1.2, y: -1.6, z: 1.1 } } }
+               camera: D.camera || { eye: { x: 1.2, y: -1.6, z: 1.1 } } }
     };
-    var traces = [surface, marker];
+    var traces = [surface].concat(extraLines(s, k, cutBox.checked), [marker]);
     if (E.length) { traces.splice(1, 0, outline(p, cutBox.checked)); }
     note.textContent = "von Mises: largest cell mean " + m.value_kPa.toPrecision(4) + " kPa at (" +
       m.reference_mm.map(function (c) { return c.toFixed(3); }).join(", ") + ") mm (reference)" +
@@ -206,7 +238,9 @@
     select.disabled = true;
     return;
   }
-  select.value = String(last);
+  var first = D.initial === null || D.initial === undefined ? -1 :
+    D.stages.findIndex(function (s) { return s.stage === D.initial && s.stored; });
+  select.value = String(first >= 0 ? first : last);
   [select, cutBox, fullrange, seethrough].forEach(function (b) { b.addEventListener("change", draw); });
   scaleBox.addEventListener("input", draw);
   draw();

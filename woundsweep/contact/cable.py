@@ -1,0 +1,206 @@
+"""Sutures as threads: tension-only loops through anchor regions (docs/model.md, "Sutures").
+
+A suture is a closed loop of thread through anchor points in the tissue (a simple interrupted
+stitch: the entry point and the deep point of each flank's needle track, the knot's strand
+above the wound and the buried strand below it). An anchor point is a fixed weighted average
+of node positions (a distributing coupling, as an RBE3 element): x_a = sum_k w_k (X_k + u_k),
+sum_k w_k = 1, so the thread's pull is spread over the anchor's nodes in proportion to the
+weights and no node is held. The thread slides through the tissue without friction, so the
+whole loop carries one tension; with its length l (the polygon's perimeter through the
+anchor points), its rest length L0 and its axial stiffness k = EA / L0 the energy is::
+
+    Pi_c = sum_i (1/2) k_i <l_i - L0_i>^2,   T_i = k_i <l_i - L0_i>   (tension only)
+
+The force on anchor j is T g_j, g_j = dl/dx_j = e_(j-1,j) - e_(j,j+1) (the unit vectors of
+its two strands), and on node k of it w_k T g_j; the tangent between anchors is
+k H(l - L0) g g^T + T d2l/dx2, d2l/dx2 the strands' (1 / l_s)(I - e e^T) (H(0) = 1: a loop
+tied taut resists stretching from its first step), mapped to the nodes by the weights. It is
+the exact Hessian of Pi_c, so the problem keeps its potential and its symmetric tangent. The
+weights and the node sets are the caller's (`woundsweep.physics.thread`); this module needs
+no finite-element library.
+"""
+
+from __future__ import annotations
+
+from typing import Any, NamedTuple
+
+import numpy as np
+import scipy.sparse
+
+__all__ = ["Anchor", "Cables"]
+
+
+class Anchor(NamedTuple):
+    """A distributing coupling: ``nodes`` (k,) and ``weights`` (k,) summing to 1."""
+
+    nodes: np.ndarray
+    weights: np.ndarray
+
+
+class Cables:
+    """Tension-only closed loops, the i-th through the anchors ``loops[i]`` in order (module
+    docstring). ``X`` (n, 3) reference node coordinates; ``EA_mN`` the thread's axial
+    stiffness (mN, modulus times cross-section). Slack (no force) until `tie`."""
+
+    def __init__(self, X: np.ndarray, loops: list[list[Anchor]], EA_mN: float) -> None:
+        if not loops or any(len(lp) < 2 for lp in loops):
+            raise ValueError("every loop needs at least two anchors")
+        if not (np.isfinite(EA_mN) and EA_mN > 0):
+            raise ValueError(f"EA={EA_mN!r} mN must be positive")
+        self.X = np.asarray(X, dtype=float)
+        self.n_dofs = 3 * len(self.X)
+        self.loops = [list(lp) for lp in loops]
+        for lp in self.loops:
+            for a in lp:
+                if abs(float(np.sum(a.weights)) - 1.0) > 1e-9:
+                    raise ValueError("an anchor's weights must sum to 1")
+        self.EA_mN = float(EA_mN)
+        self.rest_mm: np.ndarray | None = None
+        # Per loop: its nodes (unique) and the (anchors, nodes) weight matrix onto them.
+        self._nodes: list[np.ndarray] = []
+        self._W: list[np.ndarray] = []
+        for lp in self.loops:
+            nodes, inv = np.unique(np.concatenate([a.nodes for a in lp]), return_inverse=True)
+            W = np.zeros((len(lp), len(nodes)))
+            at = 0
+            for j, a in enumerate(lp):
+                np.add.at(W[j], inv[at : at + len(a.nodes)], a.weights)
+                at += len(a.nodes)
+            self._nodes.append(nodes.astype(np.int64))
+            self._W.append(W)
+        self._pattern: Any = None
+
+    def __len__(self) -> int:
+        return len(self.loops)
+
+    @property
+    def active(self) -> bool:
+        return self.rest_mm is not None
+
+    def anchors(self, u: np.ndarray) -> list[np.ndarray]:
+        """Per loop, (anchors, 3) its anchor points at the displacement ``u`` (flat dofs)."""
+        x = self.X + np.asarray(u).reshape(-1, 3)
+        return [W @ x[nodes] for W, nodes in zip(self._W, self._nodes)]
+
+    @staticmethod
+    def _strands(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Unit vectors (anchors, 3) and lengths of the strands j -> j + 1 (closed)."""
+        d = np.roll(p, -1, axis=0) - p
+        ell = np.linalg.norm(d, axis=1)
+        return d / ell[:, None], ell
+
+    def lengths(self, u: np.ndarray) -> np.ndarray:
+        return np.array([self._strands(p)[1].sum() for p in self.anchors(u)])
+
+    def tie(self, u: np.ndarray, shorten_mm: float | np.ndarray = 0.0) -> None:
+        """Tie every loop at the state ``u``: its rest length is its length there, less
+        ``shorten_mm``."""
+        self.rest_mm = self.lengths(u) - np.asarray(shorten_mm, dtype=float)
+        if np.any(self.rest_mm <= 0):
+            raise ValueError("a loop's rest length must be positive")
+
+    def shorten(self, by_mm: float | np.ndarray) -> None:
+        """Tighten every loop: its rest length ``by_mm`` shorter (a knot pulled further)."""
+        if self.rest_mm is None:
+            raise RuntimeError("tie() first")
+        rest = self.rest_mm - np.asarray(by_mm, dtype=float)
+        if np.any(rest <= 0):
+            raise ValueError("a loop's rest length must be positive")
+        self.rest_mm = rest
+
+    def release(self) -> None:
+        self.rest_mm = None
+
+    def stiffness(self) -> np.ndarray:
+        """k_i = EA / L0_i (mN/mm)."""
+        assert self.rest_mm is not None
+        return self.EA_mN / self.rest_mm
+
+    def tensions(self, u: np.ndarray) -> np.ndarray:
+        """T_i (mN), zero while slack or untied."""
+        if self.rest_mm is None:
+            return np.zeros(len(self))
+        return self.stiffness() * np.maximum(self.lengths(u) - self.rest_mm, 0.0)
+
+    def energy(self, u: np.ndarray) -> float:
+        if self.rest_mm is None:
+            return 0.0
+        stretch = np.maximum(self.lengths(u) - self.rest_mm, 0.0)
+        return float(0.5 * np.sum(self.stiffness() * stretch**2))
+
+    def anchor_forces(self, u: np.ndarray) -> list[np.ndarray]:
+        """Per loop, (anchors, 3): the force T g_j the tissue exerts on each anchor point
+        through the thread, dPi_c/dx_j (the thread pulls the tissue with minus it)."""
+        out = []
+        for p, t in zip(self.anchors(u), self.tensions(u)):
+            e, _ = self._strands(p)
+            out.append(t * (np.roll(e, 1, axis=0) - e))
+        return out
+
+    def force_vector(self, u: np.ndarray) -> np.ndarray:
+        """dPi_c/du (flat, mN)."""
+        out = np.zeros(self.n_dofs)
+        if self.rest_mm is None:
+            return out
+        for nodes, W, f in zip(self._nodes, self._W, self.anchor_forces(u)):
+            out.reshape(-1, 3)[nodes] += W.T @ f
+        return out
+
+    def _dofs(self, nodes: np.ndarray) -> np.ndarray:
+        return (3 * nodes[:, None] + np.arange(3)[None, :]).ravel()
+
+    def _anchor_tangent(self, p: np.ndarray, k: float, t: float) -> np.ndarray:
+        """(3A, 3A) d2Pi/dx_a2 of one loop through the anchor points ``p``."""
+        A = len(p)
+        e, ell = self._strands(p)
+        g = (np.roll(e, 1, axis=0) - e).ravel()
+        K = k * np.outer(g, g)
+        for j in range(A):
+            P = (np.eye(3) - np.outer(e[j], e[j])) * (t / ell[j])
+            a, b = 3 * j, 3 * ((j + 1) % A)
+            K[a : a + 3, a : a + 3] += P
+            K[b : b + 3, b : b + 3] += P
+            K[a : a + 3, b : b + 3] -= P
+            K[b : b + 3, a : a + 3] -= P
+        return K
+
+    def tangent_csr(self, u: np.ndarray) -> Any:
+        """d2Pi_c/du2 (scipy CSR, n_dofs square); explicit zeros keep the pattern."""
+        rows, cols, vals = [], [], []
+        T = self.tensions(u)
+        L = self.lengths(u)
+        for i, (nodes, W, p) in enumerate(zip(self._nodes, self._W, self.anchors(u))):
+            if self.rest_mm is None:
+                Ka = np.zeros((3 * len(p), 3 * len(p)))
+            else:
+                k = float(self.stiffness()[i]) if L[i] >= self.rest_mm[i] else 0.0
+                Ka = self._anchor_tangent(p, k, float(T[i]))
+            B = np.kron(W, np.eye(3))  # (3A, 3 nodes)
+            Kn = B.T @ Ka @ B
+            dofs = self._dofs(nodes)
+            rows.append(np.repeat(dofs, len(dofs)))
+            cols.append(np.tile(dofs, len(dofs)))
+            vals.append(Kn.ravel())
+        K = scipy.sparse.coo_matrix(
+            (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+            shape=(self.n_dofs, self.n_dofs),
+        ).tocsr()
+        K.sum_duplicates()
+        return K
+
+    def coupling_pattern(self) -> Any:
+        """The tangent's structure (CSR of ones): each loop's nodes coupled to each other."""
+        if self._pattern is None:
+            rows, cols = [], []
+            for nodes in self._nodes:
+                dofs = self._dofs(nodes)
+                rows.append(np.repeat(dofs, len(dofs)))
+                cols.append(np.tile(dofs, len(dofs)))
+            r, c = np.concatenate(rows), np.concatenate(cols)
+            P = scipy.sparse.csr_matrix(
+                (np.ones(len(r), dtype=np.int32), (r, c)), shape=(self.n_dofs, self.n_dofs)
+            )
+            P.sum_duplicates()
+            P.data[:] = 1
+            self._pattern = P
+        return self._pattern

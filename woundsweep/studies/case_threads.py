@@ -1,0 +1,120 @@
+"""The report's section on the sutures as threads (`woundsweep case --threads`) and its
+numbers in case.json: each thread's tension beside the apposition force it replaces, how far
+its knot was tightened, the gaps under and between the stitches, the pressure between the
+walls, and the tensions under the load after closure (docs/model.md, "Sutures as threads")."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from ..config.case import OPEN_GAP_mm
+from ..physics.sutures import NOT_APPOSED
+from ..physics.thread import NYLON_4_0, ANCHOR_RADIUS_mm
+from .case import CaseResult, ThreadRun
+from .case_format import newtons, y_mm
+from .case_literature import REPORTED_RANGE_N
+
+__all__ = ["threads_section", "threads_summary"]
+
+
+def _between(tr: ThreadRun) -> tuple[float, float]:
+    """The widest surface gap between the stitches (mm) and its y."""
+    st = tr.sutured
+    ys = np.sort(st.suture_y_mm)
+    inside = (
+        (st.gap_y_mm > ys[0]) & (st.gap_y_mm < ys[-1])
+        if len(ys) > 1
+        else st.gap_y_mm == st.gap_y_mm
+    )
+    if not inside.any():
+        return 0.0, float("nan")
+    k = int(np.argmax(np.where(inside, st.gap_mm, -np.inf)))
+    return float(st.gap_mm[k]), float(st.gap_y_mm[k])
+
+
+def threads_section(result: CaseResult) -> list[str]:
+    """The section's lines (empty without `run_case(threads=True)`)."""
+    tr = result.threads
+    if tr is None:
+        return []
+    st = tr.sutured
+    last = tr.loaded.last
+    lines = [
+        "## Sutures as threads",
+        "",
+        f"The same wound closed by {NYLON_4_0.name} threads: each suture a loop through the "
+        f"tissue within {ANCHOR_RADIUS_mm:g} mm of its two needle tracks (from the skin, "
+        f"{result.case.sutures.bite_width_mm:g} mm from the edge, to the wall at the bite "
+        "depth), tied with the edges held together, then its knot tightened until the edges "
+        f"meet under it (a gap of at most {OPEN_GAP_mm:g} mm). Its tension is the thread's; "
+        "the apposition force is what holds the edges together over the suture's stretch of "
+        "wound when they are held shut (the forces above).",
+        "",
+        "| suture | y (mm) | thread tension | pull on a flank (mN) | apposition force (mN) "
+        "| knot tightened by (mm) | gap under it (mm) | tension under the load (mN) |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for i, y in enumerate(st.suture_y_mm):
+        under = f"{last.suture_force_mN[i]:.0f}" if last is not None else "-"
+        lines.append(
+            f"| {i + 1} | {y_mm(y)} | {newtons(st.suture_force_mN[i])} | {tr.pull_mN[i]:.0f} "
+            f"| {tr.apposition_mN[i]:.0f} | {tr.shortening_mm[i]:.2f} "
+            f"| {tr.gap_at_suture_mm[i]:.3f} | {under} |"
+        )
+    gap, gy = _between(tr)
+    T = st.suture_force_mN
+    lo, hi = REPORTED_RANGE_N
+    lines += [""]
+    if tr.status == NOT_APPOSED:
+        lines.append(
+            "Not every knot could appose its edges within the tightenings allowed: the table "
+            "gives the state reached."
+        )
+    lines += [
+        f"Between the stitches the edges part by up to {gap:.3f} mm (at y = {y_mm(gy)} mm); "
+        f"the walls press on each other with up to {st.contact_pressure_kPa.max():.0f} kPa. "
+        f"The threads pull {tr.pull_mN.sum():.0f} mN in all on a flank against the "
+        f"{tr.apposition_mN.sum():.0f} mN the held-shut closure pulls: a thread pulls at its "
+        "bite, a bite width from the edge, and is tightened until the edge between bite and "
+        "wall, which springs back once released, meets the other side again.",
+        f"The tensions, {newtons(T.min())} to {newtons(T.max())}, sit "
+        + (
+            "within"
+            if lo * 1e3 <= T.max() <= hi * 1e3
+            else ("below" if T.max() < lo * 1e3 else "above")
+        )
+        + f" the {lo:g}-{hi:g} N reported for sutures (Against the literature).",
+    ]
+    if last is not None:
+        k = int(np.argmax(last.suture_force_mN - T))
+        lines.append(
+            f"Under the load after closure the thread at y = {y_mm(st.suture_y_mm[k])} mm "
+            f"rises most, {T[k]:.0f} -> {last.suture_force_mN[k]:.0f} mN; the widest surface "
+            f"gap is then {last.gap_mm.max():.3f} mm."
+        )
+    return lines
+
+
+def threads_summary(result: CaseResult) -> dict[str, Any]:
+    """case.json's ``threads`` entry (empty without threads)."""
+    tr = result.threads
+    if tr is None:
+        return {}
+    last = tr.loaded.last
+    return {
+        "threads": {
+            "status": tr.status,
+            "material": NYLON_4_0.name,
+            "anchor_radius_mm": ANCHOR_RADIUS_mm,
+            "tension_mN": tr.sutured.suture_force_mN.tolist(),
+            "pull_mN": tr.pull_mN.tolist(),
+            "apposition_force_mN": tr.apposition_mN.tolist(),
+            "knot_shortening_mm": tr.shortening_mm.tolist(),
+            "gap_at_suture_mm": tr.gap_at_suture_mm.tolist(),
+            "gap_between_max_mm": _between(tr)[0],
+            "contact_pressure_max_kPa": float(tr.sutured.contact_pressure_kPa.max()),
+            "tension_under_load_mN": None if last is None else last.suture_force_mN.tolist(),
+        }
+    }

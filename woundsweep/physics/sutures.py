@@ -60,22 +60,29 @@ NOT_APPOSED = "not-apposed"
 TIGHTEN_STEPS = 8
 # The gap's first-guess response to a loop's shortening (mm of gap per mm of loop): about
 # half, since two strands cross the wound and the bite's tissue gives way as the edges close.
-# Later steps use the measured responses (Broyden's update).
+# Later steps use each suture's measured response, kept within `RESPONSE_RANGE`.
 GAP_PER_SHORTENING = 0.5
+RESPONSE_RANGE = (0.1, 2.0)
+# Each knot is aimed at this fraction of the target gap, so that the next solve lands below it.
+AIM = 0.8
 # No tightening shortens a loop by more than this (mm) beyond the last.
 MAX_SHORTENING_STEP_mm = 2.0
+# A trial that does not converge is retried this many times, halfway back to the last one that did.
+BACKOFFS = 2
 
 
 class Tightening:
     """Each loop's shortening toward apposition at its own suture: the smallest shortenings
-    s_i >= 0 with the surface gap g_i at suture i at most the target, found by Broyden's
-    method on g(s) aimed a tenth below the target, from the diagonal response
-    -`GAP_PER_SHORTENING` (a suture's gap depends on its neighbours' knots too)."""
+    s_i >= 0 with the surface gap g_i at suture i at most the target. Each knot is moved by
+    its gap's distance to `AIM` times the target over its measured response (the secant of
+    its last two trials, first `GAP_PER_SHORTENING`): neighbours tighten together, so the
+    response measured is the one of the knots moving as they do. Untightened knots already
+    apposed stay as they are."""
 
     def __init__(self, n: int, target_mm: float) -> None:
         self.target = float(target_mm)
-        self.aim = 0.9 * self.target
-        self.J = -GAP_PER_SHORTENING * np.eye(n)
+        self.aim = AIM * self.target
+        self.response = np.full(n, GAP_PER_SHORTENING)
         self.last: tuple[np.ndarray, np.ndarray] | None = None
 
     def done(self, gaps: np.ndarray) -> bool:
@@ -85,17 +92,13 @@ class Tightening:
         """The next shortenings from the current ones ``s`` and their ``gaps``."""
         if self.last is not None:
             ds, dg = s - self.last[0], gaps - self.last[1]
-            if float(ds @ ds) > 0:
-                self.J += np.outer(dg - self.J @ ds, ds) / float(ds @ ds)
+            moved = np.abs(ds) > 1e-6
+            measured = -dg[moved] / ds[moved]
+            self.response[moved] = np.clip(measured, *RESPONSE_RANGE)
         self.last = (s.copy(), gaps.copy())
-        # Loops untightened and already apposed stay as they are.
-        active = (s > 0) | (gaps > self.aim)
-        r = np.where(active, gaps - self.aim, 0.0)
-        try:
-            delta = -np.linalg.solve(self.J, r)
-        except np.linalg.LinAlgError:
-            delta = r / GAP_PER_SHORTENING
-        delta = np.clip(delta, -MAX_SHORTENING_STEP_mm, MAX_SHORTENING_STEP_mm)
+        active = (s > 0) | (gaps > self.target)
+        delta = np.clip((gaps - self.aim) / self.response, -MAX_SHORTENING_STEP_mm,
+                        MAX_SHORTENING_STEP_mm)  # fmt: skip
         return np.maximum(s + np.where(active, delta, 0.0), 0.0)
 
 
@@ -267,7 +270,8 @@ class SuturedClosure:
         tied at its length there, the zone's Dirichlet condition released while the flank
         contact is ramped in; then, with ``apposed_gap_mm``, each loop shortened until the
         surface gap at its suture is at most that (`Tightening`; `TIGHTEN_STEPS` at most, the
-        status `NOT_APPOSED` if a gap stays wider)."""
+        status `NOT_APPOSED` if a gap stays wider; a trial that does not converge is retried
+        `BACKOFFS` times halfway back to the last that did)."""
         if self.closed_u is None:
             raise RuntimeError("close() first")
         if self.model.tie is not None:
@@ -298,10 +302,17 @@ class SuturedClosure:
             if tightenings == TIGHTEN_STEPS:
                 status = NOT_APPOSED
                 break
-            res = self._tie_from_closed(rule.step(self.shortening_mm, gaps))
+            good, trial = self.shortening_mm.copy(), rule.step(self.shortening_mm, gaps)
             tightenings += 1
-            its += int(res.iterations)
-            status = res.status
+            for _ in range(BACKOFFS + 1):
+                res = self._tie_from_closed(trial)
+                its += int(res.iterations)
+                status = res.status
+                if status == StageStatus.CONVERGED:
+                    break
+                trial = 0.5 * (good + trial)
+            if status != StageStatus.CONVERGED:  # the last apposing attempt's state is lost
+                break
         ok = status in (StageStatus.CONVERGED, NOT_APPOSED)
         self.sutured_u = m.u.copy() if ok else None
         state = self._measure() if ok else None

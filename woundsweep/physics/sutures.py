@@ -57,14 +57,17 @@ BLEND_mm = 0.5
 # The status of a thread closure that converged but stayed wider than asked at a suture.
 NOT_APPOSED = "not-apposed"
 # At most this many tightenings of the threads toward apposition (`SuturedClosure.thread`).
-TIGHTEN_STEPS = 8
+TIGHTEN_STEPS = 12
 # The gap's first-guess response to a loop's shortening (mm of gap per mm of loop): about
 # half, since two strands cross the wound and the bite's tissue gives way as the edges close.
 # Later steps use each suture's measured response, kept within `RESPONSE_RANGE`.
 GAP_PER_SHORTENING = 0.5
 RESPONSE_RANGE = (0.1, 2.0)
-# Each knot is aimed at this fraction of the target gap, so that the next solve lands below it.
+# Each knot is aimed at this fraction of the target gap, and tightened until its gap is within
+# AIM_TOLERANCE of the target from it: a knot's tension rises steeply as its gap closes, so it
+# is the tension at one gap, not anywhere below the target, that converges with the mesh.
 AIM = 0.8
+AIM_TOLERANCE = 0.05
 # No tightening shortens a loop by more than this (mm) beyond the last.
 MAX_SHORTENING_STEP_mm = 2.0
 # A trial that does not converge is retried this many times, halfway back to the last one that did.
@@ -85,8 +88,11 @@ class Tightening:
         self.response = np.full(n, GAP_PER_SHORTENING)
         self.last: tuple[np.ndarray, np.ndarray] | None = None
 
-    def done(self, gaps: np.ndarray) -> bool:
-        return bool(np.all(gaps <= self.target))
+    def done(self, s: np.ndarray, gaps: np.ndarray) -> bool:
+        """Every tightened knot's gap within `AIM_TOLERANCE` of the aim, every other's
+        below the target."""
+        near = np.abs(gaps - self.aim) <= AIM_TOLERANCE * self.target
+        return bool(np.all(np.where(s > 0, near, gaps <= self.target)))
 
     def step(self, s: np.ndarray, gaps: np.ndarray) -> np.ndarray:
         """The next shortenings from the current ones ``s`` and their ``gaps``."""
@@ -297,7 +303,7 @@ class SuturedClosure:
         tightenings = 0
         while status == StageStatus.CONVERGED and rule is not None:
             gaps = self.gaps_at_sutures()
-            if rule.done(gaps):
+            if rule.done(self.shortening_mm, gaps):
                 break
             if tightenings == TIGHTEN_STEPS:
                 status = NOT_APPOSED

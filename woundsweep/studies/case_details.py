@@ -156,7 +156,8 @@ def limits(result: CaseResult) -> list[str]:
         ["- **Threads.** The threads (Sutures as threads) pull through the tissue around their "
          "needle tracks; the needle's hole, the knot's geometry and friction in the tracks and "
          "between the walls are not modelled, and a knot is tightened only until the edges "
-         "under it meet."]
+         "under it meet. That rule fixes the sum of neighbouring threads' tensions, not their "
+         "split: one thread's tension moves by a quarter to a third between meshes."]
         if result.threads is not None
         else []
     )  # fmt: skip

@@ -79,6 +79,8 @@ def threads_section(result: CaseResult) -> list[str]:
         f"{tr.apposition_mN.sum():.0f} mN the held-shut closure pulls: a thread pulls at its "
         "bite, a bite width from the edge, and is tightened until the edge between bite and "
         "wall, which springs back once released, meets the other side again.",
+        "The threads' total is what this rule determines well; how it splits between "
+        "neighbouring sutures moves with the mesh by a quarter to a third (Limits of the model).",
         f"The tensions, {newtons(T.min())} to {newtons(T.max())}, sit "
         + (
             "within"

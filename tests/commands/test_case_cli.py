@@ -86,11 +86,12 @@ def test_case_without_the_optional_solves_says_so(tmp_path: Path) -> None:
     assert data["band"] == {} and len(data["scan"]) == 1 and "mesh_check" not in data
     report = (out / "report.md").read_text()
     assert "the mesh check was skipped (`--no-mesh-check`)" in report
-    # --threads: each knot tightened until the edges meet under it, the tensions reported
+    # --threads: every knot drawn with one tension until the edges meet, the tensions reported
     # beside the apposition forces, in the report, its literature table and case.json.
     th = data["threads"]
     assert th["status"] == "converged" and len(th["tension_mN"]) == 3
     assert max(th["gap_at_suture_mm"]) <= data["open_gap_mm"]
     assert all(t > 0 for t in th["tension_mN"]) and all(s >= 0 for s in th["knot_shortening_mm"])
     assert th["pull_mN"] == pytest.approx([2 * t for t in th["tension_mN"]], rel=0.05)
-    assert "## Sutures as threads" in report and "threads tightened until the edges meet" in report
+    assert th["tension_mN"] == pytest.approx([th["tension_mN"][0]] * 3, rel=1e-6)  # one pull
+    assert "## Sutures as threads" in report and "threads drawn until the edges meet" in report

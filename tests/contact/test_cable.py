@@ -74,3 +74,26 @@ def test_a_straight_pull_between_two_anchors() -> None:
     assert T == pytest.approx(1000.0 / 19.8 * 0.2)
     f = c.force_vector(np.zeros(12)).reshape(-1, 3)
     assert f[:, 0] == pytest.approx([-T, -T, T, T])  # dPi/du: the pull is minus it
+
+
+def test_a_pulled_loop_is_the_gradient_of_t_times_its_length_and_holds_there() -> None:
+    rng = np.random.default_rng(7)
+    X, loops = _loops(rng, 30)
+    c = Cables(X, loops, EA_mN=50.0)
+    c.pull(3.0)
+    u = rng.normal(size=3 * len(X)) * 0.05
+    assert c.tensions(u) == pytest.approx([3.0, 3.0])
+    assert c.energy(u) == pytest.approx(3.0 * c.lengths(u).sum())
+    f, K = c.force_vector(u), c.tangent_csr(u).toarray()
+    eps = 1e-6
+    for i in rng.choice(len(u), size=20, replace=False):
+        e = np.zeros_like(u)
+        e[i] = eps
+        assert (c.energy(u + e) - c.energy(u - e)) / (2 * eps) == pytest.approx(
+            f[i], rel=1e-6, abs=1e-9
+        )
+        dk = (c.force_vector(u + e) - c.force_vector(u - e)) / (2 * eps)
+        assert dk == pytest.approx(K[:, i], rel=1e-5, abs=1e-7)
+    # Held at that state, each loop carries the pull there and resists stretching.
+    c.hold(u)
+    assert c.pull_mN is None and c.tensions(u) == pytest.approx([3.0, 3.0], rel=1e-9)

@@ -1,7 +1,7 @@
 """Sutures as threads (`woundsweep.physics.thread`, `SuturedClosure.thread`): the slit closed
 by threads against its closed form, a thread's pull on its flank, the tension's independence
-of the thread's stiffness, and the tying rule that tightens every loop until its suture's
-edges meet."""
+of the thread's stiffness, and the tying rule that pulls every knot with one tension until
+the edges meet under every suture."""
 
 from __future__ import annotations
 
@@ -96,12 +96,16 @@ def test_the_tension_does_not_depend_on_the_threads_stiffness(tied) -> None:
     assert again.state.suture_force_mN == pytest.approx(st.suture_force_mN, rel=0.01)
 
 
-def test_each_loop_is_tightened_until_its_sutures_edges_meet(tied) -> None:
+def test_the_knots_are_pulled_with_one_tension_until_the_edges_meet(tied) -> None:
+    from woundsweep.physics.sutures import AIM, AIM_TOLERANCE
+
     sc, case, untightened = tied
     step = sc.thread(case.sutures, radius_mm=0.75, apposed_gap_mm=0.1)
     assert step.status == "converged"
     gaps = sc.gaps_at_sutures()
-    assert np.all(gaps <= 0.1) and gaps.max() > 0.05  # apposed, not crushed shut
+    assert abs(gaps.max() - AIM * 0.1) <= AIM_TOLERANCE * 0.1 + 1e-12  # apposed, not crushed
+    T = step.state.suture_force_mN
+    assert T == pytest.approx(np.full(3, sc.knot_tension_mN), rel=1e-6)  # held at one pull
+    assert np.all(T > untightened.suture_force_mN)
     assert np.all(sc.shortening_mm > 0)
     assert sc.shortening_mm[0] == pytest.approx(sc.shortening_mm[2], rel=1e-3)
-    assert np.all(step.state.suture_force_mN > untightened.suture_force_mN)

@@ -197,9 +197,10 @@ def _set_aside_previous(out: Path, names: tuple[str, ...] = _REPORT_FILES) -> No
 @click.option(
     "--threads",
     is_flag=True,
-    help="Also close the wound by 4-0 nylon threads (each knot tightened until the edges meet "
-    "under it) and report each thread's tension beside the apposition force, the gaps "
-    "between the stitches and the tensions under the load (about five more solves).",
+    help="Also close the wound by 4-0 nylon threads (every knot drawn with one tension, the "
+    "smallest that brings the edges together under every suture) and report each thread's "
+    "tension beside the apposition force, the gaps between the stitches and the tensions "
+    "under the load (about five more solves).",
 )
 def cmd(out: Path, length_mm: float, width_mm: float | None, angle_deg: float, site: str,
         dermis_mm: float | None, subcutis_mm: float | None, depth_mm: float | None, skin: str,

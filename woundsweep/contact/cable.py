@@ -56,6 +56,8 @@ class Cables:
                     raise ValueError("an anchor's weights must sum to 1")
         self.EA_mN = float(EA_mN)
         self.rest_mm: np.ndarray | None = None
+        # Pulled (`pull`): every loop carries this tension whatever its length (mN).
+        self.pull_mN: float | None = None
         # Per loop: its nodes (unique) and the (anchors, nodes) weight matrix onto them.
         self._nodes: list[np.ndarray] = []
         self._W: list[np.ndarray] = []
@@ -75,7 +77,7 @@ class Cables:
 
     @property
     def active(self) -> bool:
-        return self.rest_mm is not None
+        return self.rest_mm is not None or self.pull_mN is not None
 
     def anchors(self, u: np.ndarray) -> list[np.ndarray]:
         """Per loop, (anchors, 3) its anchor points at the displacement ``u`` (flat dofs)."""
@@ -95,9 +97,26 @@ class Cables:
     def tie(self, u: np.ndarray, shorten_mm: float | np.ndarray = 0.0) -> None:
         """Tie every loop at the state ``u``: its rest length is its length there, less
         ``shorten_mm``."""
+        self.pull_mN = None
         self.rest_mm = self.lengths(u) - np.asarray(shorten_mm, dtype=float)
         if np.any(self.rest_mm <= 0):
             raise ValueError("a loop's rest length must be positive")
+
+    def pull(self, tension_mN: float) -> None:
+        """Pull every loop with ``tension_mN`` whatever its length (a knot drawn with a
+        given force): Pi_c = T sum_i l_i."""
+        if not (np.isfinite(tension_mN) and tension_mN > 0):
+            raise ValueError(f"tension={tension_mN!r} mN must be positive")
+        self.rest_mm, self.pull_mN = None, float(tension_mN)
+
+    def hold(self, u: np.ndarray) -> None:
+        """Tie every pulled loop at the state ``u`` so that it carries the pull there: rest
+        length l / (1 + T / EA), so k (l - L0) = T."""
+        if self.pull_mN is None:
+            raise RuntimeError("pull() first")
+        t = self.pull_mN
+        self.pull_mN = None
+        self.rest_mm = self.lengths(u) / (1.0 + t / self.EA_mN)
 
     def shorten(self, by_mm: float | np.ndarray) -> None:
         """Tighten every loop: its rest length ``by_mm`` shorter (a knot pulled further)."""
@@ -109,7 +128,7 @@ class Cables:
         self.rest_mm = rest
 
     def release(self) -> None:
-        self.rest_mm = None
+        self.rest_mm = self.pull_mN = None
 
     def stiffness(self) -> np.ndarray:
         """k_i = EA / L0_i (mN/mm)."""
@@ -118,11 +137,15 @@ class Cables:
 
     def tensions(self, u: np.ndarray) -> np.ndarray:
         """T_i (mN), zero while slack or untied."""
+        if self.pull_mN is not None:
+            return np.full(len(self), self.pull_mN)
         if self.rest_mm is None:
             return np.zeros(len(self))
         return self.stiffness() * np.maximum(self.lengths(u) - self.rest_mm, 0.0)
 
     def energy(self, u: np.ndarray) -> float:
+        if self.pull_mN is not None:
+            return float(self.pull_mN * self.lengths(u).sum())
         if self.rest_mm is None:
             return 0.0
         stretch = np.maximum(self.lengths(u) - self.rest_mm, 0.0)
@@ -140,7 +163,7 @@ class Cables:
     def force_vector(self, u: np.ndarray) -> np.ndarray:
         """dPi_c/du (flat, mN)."""
         out = np.zeros(self.n_dofs)
-        if self.rest_mm is None:
+        if not self.active:
             return out
         for nodes, W, f in zip(self._nodes, self._W, self.anchor_forces(u)):
             out.reshape(-1, 3)[nodes] += W.T @ f
@@ -170,7 +193,9 @@ class Cables:
         T = self.tensions(u)
         L = self.lengths(u)
         for i, (nodes, W, p) in enumerate(zip(self._nodes, self._W, self.anchors(u))):
-            if self.rest_mm is None:
+            if self.pull_mN is not None:  # a constant pull: the strands' turning only
+                Ka = self._anchor_tangent(p, 0.0, self.pull_mN)
+            elif self.rest_mm is None:
                 Ka = np.zeros((3 * len(p), 3 * len(p)))
             else:
                 k = float(self.stiffness()[i]) if L[i] >= self.rest_mm[i] else 0.0

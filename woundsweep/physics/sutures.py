@@ -58,54 +58,33 @@ BLEND_mm = 0.5
 NOT_APPOSED = "not-apposed"
 # At most this many tightenings of the threads toward apposition (`SuturedClosure.thread`).
 TIGHTEN_STEPS = 12
-# The gap's first-guess response to a loop's shortening (mm of gap per mm of loop): about
-# half, since two strands cross the wound and the bite's tissue gives way as the edges close.
-# Later steps use each suture's measured response, kept within `RESPONSE_RANGE`.
-GAP_PER_SHORTENING = 0.5
-RESPONSE_RANGE = (0.1, 2.0)
-# Each knot is aimed at this fraction of the target gap, and tightened until its gap is within
-# AIM_TOLERANCE of the target from it: a knot's tension rises steeply as its gap closes, so it
-# is the tension at one gap, not anywhere below the target, that converges with the mesh.
+# The knots' first pull: this fraction of the largest apposition force (tightened threads pull
+# their flank with 2 T, about 1.3-1.6 times the apposition force).
+FIRST_PULL_PER_APPOSITION = 0.7
+# The knots are pulled until the widest gap under a suture is within AIM_TOLERANCE of the target
+# from AIM times it: one gap, not anywhere below the target, so that the pull is determined.
 AIM = 0.8
 AIM_TOLERANCE = 0.05
-# No tightening shortens a loop by more than this (mm) beyond the last.
-MAX_SHORTENING_STEP_mm = 2.0
-# A trial that does not converge is retried this many times, halfway back to the last one that did.
+# A trial that does not converge is retried this many times, halfway back to the last that did.
 BACKOFFS = 2
 
 
-class Tightening:
-    """Each loop's shortening toward apposition at its own suture: the smallest shortenings
-    s_i >= 0 with the surface gap g_i at suture i at most the target. Each knot is moved by
-    its gap's distance to `AIM` times the target over its measured response (the secant of
-    its last two trials, first `GAP_PER_SHORTENING`): neighbours tighten together, so the
-    response measured is the one of the knots moving as they do. Untightened knots already
-    apposed stay as they are."""
-
-    def __init__(self, n: int, target_mm: float) -> None:
-        self.target = float(target_mm)
-        self.aim = AIM * self.target
-        self.response = np.full(n, GAP_PER_SHORTENING)
-        self.last: tuple[np.ndarray, np.ndarray] | None = None
-
-    def done(self, s: np.ndarray, gaps: np.ndarray) -> bool:
-        """Every tightened knot's gap within `AIM_TOLERANCE` of the aim, every other's
-        below the target."""
-        near = np.abs(gaps - self.aim) <= AIM_TOLERANCE * self.target
-        return bool(np.all(np.where(s > 0, near, gaps <= self.target)))
-
-    def step(self, s: np.ndarray, gaps: np.ndarray) -> np.ndarray:
-        """The next shortenings from the current ones ``s`` and their ``gaps``."""
-        if self.last is not None:
-            ds, dg = s - self.last[0], gaps - self.last[1]
-            moved = np.abs(ds) > 1e-6
-            measured = -dg[moved] / ds[moved]
-            self.response[moved] = np.clip(measured, *RESPONSE_RANGE)
-        self.last = (s.copy(), gaps.copy())
-        active = (s > 0) | (gaps > self.target)
-        delta = np.clip((gaps - self.aim) / self.response, -MAX_SHORTENING_STEP_mm,
-                        MAX_SHORTENING_STEP_mm)  # fmt: skip
-        return np.maximum(s + np.where(active, delta, 0.0), 0.0)
+def _next_pull(history: list[tuple[float, float]], aim: float) -> float:
+    """The next knot tension (mN) from the (tension, widest gap) trials so far: the secant
+    through the two nearest the aim, kept inside the bracket the trials give (halfway into
+    it when the secant leaves it), or x1.5 / /1.5 while no trial lies on one side."""
+    below = [t for t, g in history if g <= aim]  # pulled enough
+    above = [t for t, g in history if g > aim]
+    lo, hi = (max(above) if above else None), (min(below) if below else None)
+    t1, g1 = history[-1]
+    if lo is None:
+        return t1 / 1.5
+    if hi is None:
+        return t1 * 1.5
+    pts = sorted(history, key=lambda h: abs(h[1] - aim))[:2]
+    (ta, ga), (tb, gb) = pts
+    guess = ta + (aim - ga) * (tb - ta) / (gb - ga) if gb != ga else 0.5 * (lo + hi)
+    return guess if lo < guess < hi else 0.5 * (lo + hi)
 
 
 class SolveStep(NamedTuple):
@@ -146,6 +125,7 @@ class SuturedClosure:
         self.cables: Cables | None = None
         self.tracks_mm: np.ndarray = np.zeros((0, 2, 2, 3))  # (suture, flank, entry/exit, xyz)
         self.shortening_mm = np.zeros(0)  # per loop: how much shorter than at apposition, mm
+        self.knot_tension_mN: float | None = None  # the one pull the knots were tied with
 
     @property
     def domain(self) -> WoundDomain:
@@ -274,10 +254,10 @@ class SuturedClosure:
     ) -> SolveStep:
         """Close the wound by threads from the stage-2 state (module docstring): every loop
         tied at its length there, the zone's Dirichlet condition released while the flank
-        contact is ramped in; then, with ``apposed_gap_mm``, each loop shortened until the
-        surface gap at its suture is at most that (`Tightening`; `TIGHTEN_STEPS` at most, the
-        status `NOT_APPOSED` if a gap stays wider; a trial that does not converge is retried
-        `BACKOFFS` times halfway back to the last that did)."""
+        contact is ramped in; then, with ``apposed_gap_mm``, every knot pulled with one tension
+        until the widest gap under a suture is just below that, and held there
+        (`_pull_until_apposed`; `TIGHTEN_STEPS` trials at most, the status `NOT_APPOSED` if
+        none lands)."""
         if self.closed_u is None:
             raise RuntimeError("close() first")
         if self.model.tie is not None:
@@ -296,44 +276,30 @@ class SuturedClosure:
         self.cables, self.tracks_mm, self.positions_mm = cables, tracks, ys
         self._shares = None
         m.attach_cables(cables)
-        res = self._tie_from_closed(np.zeros(len(ys)))
+        self.knot_tension_mN = None
+        res = self._from_closed(None)
         its = int(res.iterations)
         status: str = res.status
-        rule = None if apposed_gap_mm is None else Tightening(len(ys), apposed_gap_mm)
-        tightenings = 0
-        while status == StageStatus.CONVERGED and rule is not None:
-            gaps = self.gaps_at_sutures()
-            if rule.done(self.shortening_mm, gaps):
-                break
-            if tightenings == TIGHTEN_STEPS:
-                status = NOT_APPOSED
-                break
-            good, trial = self.shortening_mm.copy(), rule.step(self.shortening_mm, gaps)
-            tightenings += 1
-            for _ in range(BACKOFFS + 1):
-                res = self._tie_from_closed(trial)
-                its += int(res.iterations)
-                status = res.status
-                if status == StageStatus.CONVERGED:
-                    break
-                trial = 0.5 * (good + trial)
-            if status != StageStatus.CONVERGED:  # the last apposing attempt's state is lost
-                break
+        self.shortening_mm = np.zeros(len(ys))
+        if status == StageStatus.CONVERGED and apposed_gap_mm is not None:
+            status, n = self._pull_until_apposed(ys, apposed_gap_mm)
+            its += n
         ok = status in (StageStatus.CONVERGED, NOT_APPOSED)
         self.sutured_u = m.u.copy() if ok else None
         state = self._measure() if ok else None
         return SolveStep(status, its, time.perf_counter() - t0, state)
 
-    def _tie_from_closed(self, shortening_mm: np.ndarray) -> Any:
-        """From the stage-2 state: each loop tied ``shortening_mm`` shorter than its length
-        there, the zone's condition released and the contact ramped in (as stage 4); the
-        continuation's result. Every tightening starts from the apposed state, since the
-        contact that a tightened wound engages is brought in by the ramp."""
+    def _from_closed(self, pull_mN: float | None) -> Any:
+        """From the stage-2 state: the loops tied at their length there (``pull_mN`` None) or
+        pulled with ``pull_mN``, the zone's condition released and the contact ramped in (as
+        stage 4); the continuation's result."""
         m, d = self.model, self.domain
         assert self.cables is not None and self.closed_u is not None
         m.u[:] = self.closed_u
-        self.cables.tie(m.u, shortening_mm)
-        self.shortening_mm = np.asarray(shortening_mm, dtype=float).copy()
+        if pull_mN is None:
+            self.cables.tie(m.u)
+        else:
+            self.cables.pull(pull_mN)
         step = LoadStep(
             "thread-tie",
             (Dirichlet(d.gauge_rows()),),
@@ -342,6 +308,41 @@ class SuturedClosure:
             solve=Solve.CONTACT,
         )
         return run_load_step(m, step).solve
+
+    def _pull_until_apposed(self, ys: Sequence[float], target_mm: float) -> tuple[str, int]:
+        """Every knot pulled with one tension, the smallest that brings the widest gap under
+        a suture to `AIM` x ``target_mm`` (within `AIM_TOLERANCE` x it), then held: each loop
+        tied at its length there. (status, Newton steps)."""
+        assert self.cables is not None and self.closed_u is not None
+        apposed = self.cables.lengths(self.closed_u)
+        aim, tol = AIM * target_mm, AIM_TOLERANCE * target_mm
+        t = FIRST_PULL_PER_APPOSITION * float(np.max(self.apposition_forces(ys)))
+        history: list[tuple[float, float]] = []
+        its, good = 0, None
+        status: str = NOT_APPOSED
+        for _ in range(TIGHTEN_STEPS):
+            for _ in range(BACKOFFS + 1):
+                res = self._from_closed(t)
+                its += int(res.iterations)
+                if res.status == StageStatus.CONVERGED:
+                    break
+                if good is None:
+                    return res.status, its
+                t = 0.5 * (t + good)
+            else:
+                return res.status, its
+            good = t
+            g = float(self.gaps_at_sutures().max())
+            history.append((t, g))
+            if abs(g - aim) <= tol:
+                status = StageStatus.CONVERGED
+                break
+            t = _next_pull(history, aim)
+        self.knot_tension_mN = good
+        self.cables.hold(self.model.u)
+        assert self.cables.rest_mm is not None
+        self.shortening_mm = apposed - self.cables.rest_mm
+        return status, its
 
     def gaps_at_sutures(self) -> np.ndarray:
         """The surface gap at each suture's y in the current state (mm)."""

@@ -109,10 +109,10 @@ class Cost(NamedTuple):
 
 
 class ThreadRun(NamedTuple):
-    """The case closed by threads (`SuturedClosure.thread`), each knot tightened until the
-    edges meet under it, and the case's load after closure on it."""
+    """The case closed by threads (`SuturedClosure.thread`), every knot drawn with one
+    tension until the edges meet under every suture, and the case's load after closure."""
 
-    status: str  # "converged", or `NOT_APPOSED` if a knot could not appose its edges
+    status: str  # "converged", or `NOT_APPOSED` if no trial's tension landed on the aim
     sutured: SutureState  # suture_force_mN: each thread's tension
     pull_mN: np.ndarray  # each thread's pull on a flank toward the wound (about 2 T)
     apposition_mN: np.ndarray  # the stage-2 Dirichlet pull over each suture's stretch
@@ -317,8 +317,8 @@ def run_case(
 
 def run_threads(case: ClinicalCase, mesh: Any, lens: Any, echo: Callable[[str], None]) -> ThreadRun:
     """The case's wound closed by threads on ``mesh`` (a model of its own: the footprints'
-    tie and the threads do not share one), each knot tightened until the surface gap under it
-    is at most `OPEN_GAP_mm`, then the case's load after closure."""
+    tie and the threads do not share one), every knot drawn with one tension until the widest
+    surface gap under a suture is just below `OPEN_GAP_mm`, then the case's load after closure."""
     sc = SuturedClosure(
         mesh, lens, case.zone_depth_fraction, SolverSettings(element_degree=case.element_degree)
     )
@@ -331,9 +331,7 @@ def run_threads(case: ClinicalCase, mesh: Any, lens: Any, echo: Callable[[str], 
     ys = case.sutures.positions(case.length_mm)
     appose = sc.apposition_forces(ys)
     st = sc.thread(case.sutures, apposed_gap_mm=OPEN_GAP_mm)
-    echo(
-        f"  tied and tightened: {st.status} ({st.newton_iterations} Newton steps, {st.time_s:.1f} s)"
-    )
+    echo(f"  tied and drawn: {st.status} ({st.newton_iterations} Newton steps, {st.time_s:.1f} s)")
     if st.state is None:
         raise CaseNotSolved(f"threads: {st.status}")
     pull, gaps, short = sc.thread_pull(), sc.gaps_at_sutures(), sc.shortening_mm.copy()

@@ -155,9 +155,9 @@ def limits(result: CaseResult) -> list[str]:
     threads = (
         ["- **Threads.** The threads (Sutures as threads) pull through the tissue around their "
          "needle tracks; the needle's hole, the knot's geometry and friction in the tracks and "
-         "between the walls are not modelled, and a knot is tightened only until the edges "
-         "under it meet. That rule fixes the sum of neighbouring threads' tensions, not their "
-         "split: one thread's tension moves by a quarter to a third between meshes."]
+         "between the walls are not modelled; every knot is drawn with one tension, the "
+         "smallest that brings the edges together under every suture, so the threads' "
+         "tensions differ only under the load after closure."]
         if result.threads is not None
         else []
     )  # fmt: skip

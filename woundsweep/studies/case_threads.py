@@ -1,6 +1,6 @@
 """The report's section on the sutures as threads (`woundsweep case --threads`) and its
 numbers in case.json: each thread's tension beside the apposition force it replaces, how far
-its knot was tightened, the gaps under and between the stitches, the pressure between the
+its knot was drawn, the gaps under and between the stitches, the pressure between the
 walls, and the tensions under the load after closure (docs/model.md, "Sutures as threads")."""
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 
 from ..config.case import OPEN_GAP_mm
-from ..physics.sutures import NOT_APPOSED
+from ..physics.sutures import AIM, NOT_APPOSED
 from ..physics.thread import NYLON_4_0, ANCHOR_RADIUS_mm
 from .case import CaseResult, ThreadRun
 from .case_format import newtons, y_mm
@@ -47,13 +47,15 @@ def threads_section(result: CaseResult) -> list[str]:
         f"The same wound closed by {NYLON_4_0.name} threads: each suture a loop through the "
         f"tissue within {ANCHOR_RADIUS_mm:g} mm of its two needle tracks (from the skin, "
         f"{result.case.sutures.bite_width_mm:g} mm from the edge, to the wall at the bite "
-        "depth), tied with the edges held together, then its knot tightened until the edges "
-        f"meet under it (a gap of at most {OPEN_GAP_mm:g} mm). Its tension is the thread's; "
-        "the apposition force is what holds the edges together over the suture's stretch of "
-        "wound when they are held shut (the forces above).",
+        "depth), every knot drawn with one tension, the smallest that brings the edges "
+        f"together under every suture (the widest gap {AIM * OPEN_GAP_mm:g} mm, open above "
+        f"{OPEN_GAP_mm:g} mm), then tied. The threads' tensions are equal by that rule until "
+        "the load after closure; what differs between the sutures is the apposition force "
+        "(what holds the edges together over each suture's stretch of wound when they are "
+        "held shut, the forces above) and how far each knot had to be drawn.",
         "",
         "| suture | y (mm) | thread tension | pull on a flank (mN) | apposition force (mN) "
-        "| knot tightened by (mm) | gap under it (mm) | tension under the load (mN) |",
+        "| knot drawn in by (mm) | gap under it (mm) | tension under the load (mN) |",
         "|---|---|---|---|---|---|---|---|",
     ]
     for i, y in enumerate(st.suture_y_mm):
@@ -69,18 +71,16 @@ def threads_section(result: CaseResult) -> list[str]:
     lines += [""]
     if tr.status == NOT_APPOSED:
         lines.append(
-            "Not every knot could appose its edges within the tightenings allowed: the table "
-            "gives the state reached."
+            "No knot tension within the trials allowed brought the widest gap to the aim: the "
+            "table gives the last state reached."
         )
     lines += [
         f"Between the stitches the edges part by up to {gap:.3f} mm (at y = {y_mm(gy)} mm); "
         f"the walls press on each other with up to {st.contact_pressure_kPa.max():.0f} kPa. "
         f"The threads pull {tr.pull_mN.sum():.0f} mN in all on a flank against the "
         f"{tr.apposition_mN.sum():.0f} mN the held-shut closure pulls: a thread pulls at its "
-        "bite, a bite width from the edge, and is tightened until the edge between bite and "
-        "wall, which springs back once released, meets the other side again.",
-        "The threads' total is what this rule determines well; how it splits between "
-        "neighbouring sutures moves with the mesh by a quarter to a third (Limits of the model).",
+        "bite, a bite width from the edge, and is drawn until the edge between bite and wall, "
+        "which springs back once released, meets the other side again.",
         f"The tensions, {newtons(T.min())} to {newtons(T.max())}, sit "
         + (
             "within"

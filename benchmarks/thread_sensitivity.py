@@ -15,36 +15,28 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
-from woundsweep.config.case import ClinicalCase, OPEN_GAP_mm
-from woundsweep.config.solver import SolverSettings
-from woundsweep.config.sutures import SuturePlan
-from woundsweep.mesh.build import build_mesh
+from woundsweep.config.case import OPEN_GAP_mm
 from woundsweep.physics.materials import JobMaterials
-from woundsweep.physics.sutures import SuturedClosure
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests" / "support"))
+from small_wound import small_closure  # noqa: E402
 
 VARIANTS = (("normal", 1.05), ("normal", None), ("normal", 1.15), ("soft", None), ("stiff", None))
 
 
 def main() -> None:
-    case = ClinicalCase(
-        length_mm=9.0, width_mm=3.0, dermal_thickness_mm=1.5, subcutis_thickness_mm=1.5,
-        depth_mm=2.4, sutures=SuturePlan(count=3), mesh_size_factor=0.3, element_degree=1,
-    )  # fmt: skip
-    spec = case.geometry()
-    spec = type(spec)(**{**spec.to_dict(), "patch_half_length_mm": 12.0})
-    mesh = build_mesh(spec)
-    ys = case.sutures.positions(case.length_mm)
     for skin, tsf in VARIANTS:
         materials = JobMaterials.table2(skin, 90.0)
         if tsf is not None:
             materials = dataclasses.replace(materials, tsf=tsf)
-        sc = SuturedClosure(
-            mesh, spec.lens(), case.zone_depth_fraction, SolverSettings(element_degree=1)
-        )
+        sc, case = small_closure()  # a new model each: the threads tie it
+        ys = case.sutures.positions(case.length_mm)
         t0 = time.perf_counter()
         sc.close(materials, 90.0)
         appose = sc.apposition_forces(ys)

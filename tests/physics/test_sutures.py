@@ -139,19 +139,11 @@ def test_even_positions_crowd_where_the_load_is() -> None:
 
 @pytest.fixture(scope="module")
 def closure():
-    from woundsweep.config.solver import SolverSettings
-    from woundsweep.mesh.build import build_mesh
-    from woundsweep.physics.materials import JobMaterials
-    from woundsweep.physics.sutures import SuturedClosure
+    from small_wound import small_closure
 
-    case = ClinicalCase(
-        length_mm=9.0, width_mm=3.0, dermal_thickness_mm=1.5, subcutis_thickness_mm=1.5,
-        depth_mm=2.4, sutures=SuturePlan(count=3), mesh_size_factor=0.3, element_degree=1,
-    )  # fmt: skip
-    spec = case.geometry()
-    spec = type(spec)(**{**spec.to_dict(), "patch_half_length_mm": 12.0})
-    p1 = SolverSettings(element_degree=1)  # the case's element
-    sc = SuturedClosure(build_mesh(spec), spec.lens(), case.zone_depth_fraction, p1)
+    from woundsweep.physics.materials import JobMaterials
+
+    sc, case = small_closure()
     steps = sc.close(JobMaterials.table2("normal", 90.0), 90.0)
     assert [s.status for s in steps] == ["converged", "converged"]
     return sc, case

@@ -10,8 +10,6 @@ import dataclasses
 import numpy as np
 import pytest
 
-from woundsweep.config.case import ClinicalCase
-from woundsweep.config.sutures import SuturePlan
 from woundsweep.physics.thread import NYLON_4_0
 
 pytestmark = pytest.mark.fem
@@ -45,20 +43,11 @@ def test_more_threads_bring_the_slit_closer_to_the_homogeneous_state(slit) -> No
 
 
 def _small_wound():
-    from woundsweep.config.solver import SolverSettings
-    from woundsweep.mesh.build import build_mesh
-    from woundsweep.physics.materials import JobMaterials
-    from woundsweep.physics.sutures import SuturedClosure
+    from small_wound import small_closure
 
-    case = ClinicalCase(
-        length_mm=9.0, width_mm=3.0, dermal_thickness_mm=1.5, subcutis_thickness_mm=1.5,
-        depth_mm=2.4, sutures=SuturePlan(count=3), mesh_size_factor=0.3, element_degree=1,
-    )  # fmt: skip
-    spec = case.geometry()
-    spec = type(spec)(**{**spec.to_dict(), "patch_half_length_mm": 12.0})
-    sc = SuturedClosure(
-        build_mesh(spec), spec.lens(), case.zone_depth_fraction, SolverSettings(element_degree=1)
-    )
+    from woundsweep.physics.materials import JobMaterials
+
+    sc, case = small_closure()
     steps = sc.close(JobMaterials.table2("normal", 90.0), 90.0)
     assert [s.status for s in steps] == ["converged", "converged"]
     return sc, case

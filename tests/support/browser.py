@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import io
 import shutil
+import time
 import warnings
 from typing import Any
 
@@ -73,3 +74,15 @@ def canvas_colour_fraction(png: bytes, box: tuple[int, int, int, int]) -> tuple[
     crop = img[y0:y1, x0:x1]
     chroma = crop.max(axis=2) - crop.min(axis=2)
     return float((chroma > 40).mean()), float(crop.std())
+
+
+def wait_for(driver: Any, script: str, timeout: float = 60.0) -> Any:
+    """Run ``script`` in the page until it returns something truthy (AssertionError after
+    ``timeout`` s)."""
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        value = driver.execute_script(script)
+        if value:
+            return value
+        time.sleep(0.2)
+    raise AssertionError(f"timed out waiting for: {script}")

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from browser import canvas_colour_fraction, console_errors
+from browser import canvas_colour_fraction, console_errors, wait_for
 from viz_store import make_store
 
 from woundsweep.cli import main
@@ -31,16 +31,6 @@ def site(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     assert main(["view", str(run), "--job", "1", "--out", str(base / "job1.html")]) == 0
     assert main(["atlas", str(run), "--out", str(base / "atlas")]) == 0
     return {"run": run, "view": view, "view1": base / "job1.html", "atlas": base / "atlas"}
-
-
-def _wait(driver, script: str, timeout: float = 60.0):
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        value = driver.execute_script(script)
-        if value:
-            return value
-        time.sleep(0.2)
-    raise AssertionError(f"timed out waiting for: {script}")
 
 
 def _shot(driver, name: str, tmp_path: Path) -> bytes:
@@ -73,7 +63,7 @@ def _plot_box(driver) -> tuple[int, int, int, int]:
 
 def _load(driver, path: Path) -> None:
     driver.get(path.as_uri())
-    _wait(driver, "return document.readyState === 'complete';")
+    wait_for(driver, "return document.readyState === 'complete';")
 
 
 @pytest.mark.system
@@ -112,7 +102,7 @@ def test_missing_chromium_skips_with_the_reason(monkeypatch) -> None:
 def test_view_renders_and_switches_stage(driver, site, tmp_path: Path) -> None:
     console_errors(driver)  # drop earlier pages' messages
     _load(driver, site["view"])
-    _wait(driver, _DRAWN)
+    wait_for(driver, _DRAWN)
     time.sleep(1.0)  # let WebGL finish the frame
     assert console_errors(driver) == []
     colour, std = canvas_colour_fraction(_shot(driver, "view.png", tmp_path), _plot_box(driver))
@@ -146,7 +136,7 @@ def test_view_renders_and_switches_stage(driver, site, tmp_path: Path) -> None:
         driver.execute_script(
             f"var s=document.getElementById('stage'); s.value='{k - 1}'; s.dispatchEvent(new Event('change'));"
         )
-        _wait(
+        wait_for(
             driver,
             f"return document.getElementById('plot').layout.title.text.indexOf('stage {k}') >= 0;",
         )
@@ -188,7 +178,7 @@ def test_view_renders_and_switches_stage(driver, site, tmp_path: Path) -> None:
 def test_view_names_stages_without_fields(driver, site) -> None:
     console_errors(driver)
     _load(driver, site["view1"])
-    _wait(driver, _DRAWN)
+    wait_for(driver, _DRAWN)
     options = driver.execute_script(
         "return Array.from(document.querySelectorAll('#stage option')).map(o => [o.textContent, o.disabled]);"
     )
@@ -202,7 +192,7 @@ def test_view_names_stages_without_fields(driver, site) -> None:
 def test_atlas_index_lists_sorts_filters(driver, site, tmp_path: Path) -> None:
     console_errors(driver)
     _load(driver, site["atlas"] / "index.html")
-    _wait(driver, "return document.querySelectorAll('#index tbody tr').length > 0;")
+    wait_for(driver, "return document.querySelectorAll('#index tbody tr').length > 0;")
     _shot(driver, "atlas-index.png", tmp_path)
     rows = lambda: driver.execute_script(  # noqa: E731
         "return Array.from(document.querySelectorAll('#index tbody tr')).map(r => Number(r.dataset.job));"
@@ -235,7 +225,7 @@ def test_atlas_job_page_draws_with_shared_plotly(driver, site, tmp_path: Path) -
     assert '<script src="../assets/plotly.min.js">' in page.read_text()
     console_errors(driver)
     _load(driver, page)
-    _wait(driver, _DRAWN)
+    wait_for(driver, _DRAWN)
     time.sleep(1.0)
     assert console_errors(driver) == []
     colour, _ = canvas_colour_fraction(_shot(driver, "atlas-job.png", tmp_path), _plot_box(driver))
@@ -293,8 +283,8 @@ def test_profile_plots_do_not_overprint_at_1280x900(driver, site, tmp_path: Path
     try:
         console_errors(driver)
         _load(driver, page)
-        _wait(driver, _DRAWN)
-        _wait(driver, "return document.querySelector('#closure .legend') !== null;")
+        wait_for(driver, _DRAWN)
+        wait_for(driver, "return document.querySelector('#closure .legend') !== null;")
         time.sleep(0.5)
         _shot(driver, "view-1280x900.png", tmp_path)
         for plot in ("lines", "closure"):

@@ -9,7 +9,7 @@ import time
 from pathlib import Path
 
 import pytest
-from browser import console_errors
+from browser import console_errors, wait_for
 from case_view_data import SUTURE_Y, write_page
 
 _DRAWN = (
@@ -19,22 +19,12 @@ _DRAWN = (
 _NAMES = "return document.getElementById('plot').data.map(t => t.name);"
 
 
-def _wait(driver, script: str, timeout: float = 60.0):  # noqa: ANN001
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        value = driver.execute_script(script)
-        if value:
-            return value
-        time.sleep(0.2)
-    raise AssertionError(f"timed out waiting for: {script}")
-
-
 @pytest.mark.system
 def test_the_case_view_loads_and_draws_its_threads(driver, tmp_path: Path) -> None:  # noqa: ANN001
     page = write_page(tmp_path / "case")
     driver.get(page.as_uri())
-    _wait(driver, "return document.readyState === 'complete';")
-    _wait(driver, _DRAWN)
+    wait_for(driver, "return document.readyState === 'complete';")
+    wait_for(driver, _DRAWN)
     assert console_errors(driver) == []
     names = driver.execute_script(_NAMES)
     assert names.count("threads (sutures)") == len(SUTURE_Y)

@@ -118,15 +118,6 @@ class Cables:
         self.pull_mN = None
         self.rest_mm = self.lengths(u) / (1.0 + t / self.EA_mN)
 
-    def shorten(self, by_mm: float | np.ndarray) -> None:
-        """Tighten every loop: its rest length ``by_mm`` shorter (a knot pulled further)."""
-        if self.rest_mm is None:
-            raise RuntimeError("tie() first")
-        rest = self.rest_mm - np.asarray(by_mm, dtype=float)
-        if np.any(rest <= 0):
-            raise ValueError("a loop's rest length must be positive")
-        self.rest_mm = rest
-
     def release(self) -> None:
         self.rest_mm = self.pull_mN = None
 

@@ -33,6 +33,7 @@ __all__ = [
     "SutureState",
     "bite_points",
     "measure_state",
+    "surface_gaps",
     "surface_patch",
     "wound_rim",
 ]
@@ -95,6 +96,18 @@ def _pressure(model: WoundModel) -> tuple[np.ndarray, np.ndarray]:
     return centres, p_bins
 
 
+def surface_gaps(model: WoundModel) -> tuple[np.ndarray, np.ndarray]:
+    """The surface pairs' reference y (sorted) and their gaps x_R - x_L (mm) at the current
+    state."""
+    d, line = model.domain, model.closure_line
+    assert line is not None, "a fusiform excision's model has a closure line"
+    x = d.X[:, 0] + model.u.reshape(-1, 3)[:, 0]
+    pairs = line.surface
+    y = d.X[pairs[:, 0], 1]
+    order = np.argsort(y)
+    return y[order], (x[pairs[:, 1]] - x[pairs[:, 0]])[order]
+
+
 def measure_state(
     model: WoundModel, lens: Lens, suture_y_mm: np.ndarray, suture_force_mN: np.ndarray
 ) -> SutureState:
@@ -105,11 +118,7 @@ def measure_state(
     line = model.closure_line
     assert line is not None, "a fusiform excision's model has a closure line"
     m = line.measure(u)
-    x = d.X[:, 0] + u.reshape(-1, 3)[:, 0]
-    pairs = line.surface
-    gy = d.X[pairs[:, 0], 1]
-    order = np.argsort(gy)
-    gap = (x[pairs[:, 1]] - x[pairs[:, 0]])[order]
+    gy, gap = surface_gaps(model)
     py, pk = _pressure(model)
     ey = np.linspace(-lens.a, lens.a, EDGE_POINTS + 2)[1:-1]
     ex = np.array([lens.x_c - lens.half_width(y) - EDGE_OFFSET_mm for y in ey])
@@ -121,7 +130,7 @@ def measure_state(
         np.asarray(suture_y_mm, dtype=float),
         np.asarray(suture_force_mN, dtype=float),
         m,
-        gy[order],
+        gy,
         gap,
         py,
         pk,

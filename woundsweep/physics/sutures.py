@@ -43,7 +43,13 @@ from .loadpath import LoadStep, Solve, run_load_step
 from .materials import JobMaterials
 from .model import WoundModel
 from .stages import contact_ramp, run_stage
-from .suture_measures import SurfacePatch, SutureState, measure_state, surface_patch
+from .suture_measures import (
+    SurfacePatch,
+    SutureState,
+    measure_state,
+    surface_gaps,
+    surface_patch,
+)
 from .thread import NYLON_4_0, ANCHOR_RADIUS_mm, SutureThread, needle_track, suture_loop
 
 __all__ = ["BLEND_mm", "NOT_APPOSED", "TIGHTEN_STEPS", "SolveStep", "SuturedClosure"]
@@ -277,13 +283,12 @@ class SuturedClosure:
         self._shares = None
         m.attach_cables(cables)
         self.knot_tension_mN = None
-        res = self._from_closed(None)
-        its = int(res.iterations)
-        status: str = res.status
         self.shortening_mm = np.zeros(len(ys))
-        if status == StageStatus.CONVERGED and apposed_gap_mm is not None:
-            status, n = self._pull_until_apposed(ys, apposed_gap_mm)
-            its += n
+        if apposed_gap_mm is None:
+            res = self._from_closed(None)
+            status, its = str(res.status), int(res.iterations)
+        else:  # every trial starts from the stage-2 state: the tie at apposition is not needed
+            status, its = self._pull_until_apposed(ys, apposed_gap_mm)
         ok = status in (StageStatus.CONVERGED, NOT_APPOSED)
         self.sutured_u = m.u.copy() if ok else None
         state = self._measure() if ok else None
@@ -346,14 +351,8 @@ class SuturedClosure:
 
     def gaps_at_sutures(self) -> np.ndarray:
         """The surface gap at each suture's y in the current state (mm)."""
-        line = self.model.closure_line
-        assert line is not None
-        pairs = line.surface
-        x = self.domain.X[:, 0] + self.model.u.reshape(-1, 3)[:, 0]
-        y = self.domain.X[pairs[:, 0], 1]
-        order = np.argsort(y)
-        gap = (x[pairs[:, 1]] - x[pairs[:, 0]])[order]
-        return np.interp(np.asarray(self.positions_mm, float), y[order], gap)
+        y, gap = surface_gaps(self.model)
+        return np.interp(np.asarray(self.positions_mm, float), y, gap)
 
     def apposition_forces(self, ys: Sequence[float]) -> np.ndarray:
         """Per suture at ``ys``, the stage-2 Dirichlet closure's pull on the left wall over the

@@ -9,6 +9,7 @@ import json
 import re
 from pathlib import Path
 
+import numpy as np
 import pytest
 from cli_run import ws
 
@@ -74,15 +75,22 @@ def test_case_without_the_optional_solves_says_so(tmp_path: Path) -> None:
     )  # fmt: skip
     assert res.returncode == 0, res.stderr
     if view_flag:
-        # --view: view.html, the sutured state and the load's end, three threads each.
+        # --view: view.html, the sutured state, the load's end and (--threads) the wound
+        # closed by threads, three threads each.
         page = (out / "view.html").read_text()
         view = json.loads(re.search(r'id="wsdata">(.*?)</script>', page, re.S).group(1))
         assert [s["label"] for s in view["stages"]] == [
-            "sutured", "at the end of the load after closure"
+            "sutured", "at the end of the load after closure", "closed by threads"
         ]  # fmt: skip
         for s in view["stages"]:
             assert sum(t["group"] == "threads (sutures)" for t in s["traces"]) == 3
-            assert s["p99_von_mises_kPa"] > 0 and s["closure"] is not None
+            assert s["p99_von_mises_kPa"] > 0
+        assert all(s["closure"] is not None for s in view["stages"][:2])
+        knot = json.loads((out / "case.json").read_text())["threads"]["tension_mN"][0]
+        names = [
+            t["name"] for t in view["stages"][2]["traces"] if t["group"] == "threads (sutures)"
+        ]
+        assert all(f"({knot:.0f} mN)" in n for n in names)
         assert "[view.html](view.html)" in (out / "report.md").read_text()
     data = json.loads((out / "case.json").read_text())
     # The load's direction given against the Langer line: 90 to it is 65 to this wound.
@@ -90,12 +98,14 @@ def test_case_without_the_optional_solves_says_so(tmp_path: Path) -> None:
     assert data["band"] == {} and len(data["scan"]) == 1 and "mesh_check" not in data
     report = (out / "report.md").read_text()
     assert "the mesh check was skipped (`--no-mesh-check`)" in report
-    # --threads: every knot drawn with one tension until the edges meet, the tensions reported
+    # --threads: every knot drawn with one tension until the walls meet, the tensions reported
     # beside the apposition forces, in the report, its literature table and case.json.
     th = data["threads"]
     assert th["status"] == "converged" and len(th["tension_mN"]) == 3
-    assert max(th["gap_at_suture_mm"]) <= data["open_gap_mm"]
+    assert max(th["closest_approach_mm"]) <= data["open_gap_mm"]  # the walls meet
+    # The closest approach is over the bite depth, the surface included.
+    assert np.all(np.array(th["closest_approach_mm"]) <= np.array(th["gap_at_suture_mm"]) + 0.02)
     assert all(t > 0 for t in th["tension_mN"]) and all(s >= 0 for s in th["knot_shortening_mm"])
     assert th["pull_mN"] == pytest.approx([2 * t for t in th["tension_mN"]], rel=0.05)
     assert th["tension_mN"] == pytest.approx([th["tension_mN"][0]] * 3, rel=1e-6)  # one pull
-    assert "## Sutures as threads" in report and "threads drawn until the edges meet" in report
+    assert "## Sutures as threads" in report and "threads drawn until the walls meet" in report

@@ -40,10 +40,14 @@ def test_residual_and_tangent_are_the_energy_s_derivatives() -> None:
         dk = (c.force_vector(u + e) - c.force_vector(u - e)) / (2 * eps)
         assert dk == pytest.approx(K[:, i], rel=1e-5, abs=1e-7)
     assert K == pytest.approx(K.T)
-    # The pattern holds every entry of the tangent.
-    P = c.coupling_pattern()
-    Kc = c.tangent_csr(u).tocoo()
-    assert np.all(P[Kc.row, Kc.col] == 1)
+    # K is the sparse part plus U diag(c) U^T (`low_rank`): a loop of A anchors depends on
+    # their differences only, so each of its two terms adds at most 3 (A - 1) columns; the
+    # sparse part stays in the pattern of the representatives.
+    U, cv = c.low_rank(u)
+    assert U.shape == (len(u), len(cv)) and len(cv) <= len(loops) * 2 * 3 * (4 - 1)
+    S = c.sparse_tangent_csr(u).tocoo()
+    assert np.all(c.coupling_pattern()[S.row, S.col] == 1)
+    assert c.coupling_pattern().nnz <= len(loops) * (3 * 4) ** 2
 
 
 def test_tension_only_and_balanced() -> None:

@@ -1,7 +1,7 @@
 """Sutures as threads (`woundsweep.physics.thread`, `SuturedClosure.thread`): the slit closed
 by threads against its closed form, a thread's pull on its flank, the tension's independence
 of the thread's stiffness, and the tying rule that pulls every knot with one tension until
-the edges meet under every suture."""
+the walls meet under every suture."""
 
 from __future__ import annotations
 
@@ -91,8 +91,10 @@ def test_the_knots_are_pulled_with_one_tension_until_the_edges_meet(tied) -> Non
     sc, case, untightened = tied
     step = sc.thread(case.sutures, radius_mm=0.75, apposed_gap_mm=0.1)
     assert step.status == "converged"
-    gaps = sc.gaps_at_sutures()
-    assert abs(gaps.max() - AIM * 0.1) <= AIM_TOLERANCE * 0.1 + 1e-12  # apposed, not crushed
+    # The walls meet under every suture, the widest of their closest approaches at the aim:
+    # apposed, not crushed.
+    approach = sc.approach_at_sutures()
+    assert abs(approach.max() - AIM * 0.1) <= AIM_TOLERANCE * 0.1 + 1e-12
     T = step.state.suture_force_mN
     assert T == pytest.approx(np.full(3, sc.knot_tension_mN), rel=1e-6)  # held at one pull
     assert np.all(T > untightened.suture_force_mN)

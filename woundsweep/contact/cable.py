@@ -15,7 +15,9 @@ The force on anchor j is T g_j, g_j = dl/dx_j = e_(j-1,j) - e_(j,j+1) (the unit 
 its two strands), and on node k of it w_k T g_j; the tangent between anchors is
 k H(l - L0) g g^T + T d2l/dx2, d2l/dx2 the strands' (1 / l_s)(I - e e^T) (H(0) = 1: a loop
 tied taut resists stretching from its first step), mapped to the nodes by the weights. It is
-the exact Hessian of Pi_c, so the problem keeps its potential and its symmetric tangent. The
+the exact Hessian of Pi_c, so the problem keeps its potential and its symmetric tangent. It is
+given in two parts: a sparse one (each anchor's heaviest node standing for it), assembled with
+the tissue's, and a low-rank remainder the solver takes apart (`low_rank`). The
 weights and the node sets are the caller's (`woundsweep.physics.thread`); this module needs
 no finite-element library.
 """
@@ -70,6 +72,11 @@ class Cables:
                 at += len(a.nodes)
             self._nodes.append(nodes.astype(np.int64))
             self._W.append(W)
+        # Per loop, each anchor's heaviest node (`sparse_tangent_csr`).
+        self._reps = [
+            np.array([a.nodes[np.argmax(np.abs(a.weights))] for a in lp], dtype=np.int64)
+            for lp in self.loops
+        ]
         self._pattern: Any = None
 
     def __len__(self) -> int:
@@ -178,25 +185,32 @@ class Cables:
             K[b : b + 3, a : a + 3] -= P
         return K
 
-    def tangent_csr(self, u: np.ndarray) -> Any:
-        """d2Pi_c/du2 (scipy CSR, n_dofs square); explicit zeros keep the pattern."""
-        rows, cols, vals = [], [], []
+    def _loop_tangents(self, u: np.ndarray) -> list[tuple[int, np.ndarray]]:
+        """Per loop that pulls: (its index, its anchor tangent d2Pi/dx_a2, (3A, 3A))."""
         T = self.tensions(u)
         L = self.lengths(u)
-        for i, (nodes, W, p) in enumerate(zip(self._nodes, self._W, self.anchors(u))):
+        out = []
+        for i, p in enumerate(self.anchors(u)):
             if self.pull_mN is not None:  # a constant pull: the strands' turning only
-                Ka = self._anchor_tangent(p, 0.0, self.pull_mN)
-            elif self.rest_mm is None:
-                Ka = np.zeros((3 * len(p), 3 * len(p)))
-            else:
+                out.append((i, self._anchor_tangent(p, 0.0, self.pull_mN)))
+            elif self.rest_mm is not None:
                 k = float(self.stiffness()[i]) if L[i] >= self.rest_mm[i] else 0.0
-                Ka = self._anchor_tangent(p, k, float(T[i]))
-            B = np.kron(W, np.eye(3))  # (3A, 3 nodes)
-            Kn = B.T @ Ka @ B
-            dofs = self._dofs(nodes)
+                out.append((i, self._anchor_tangent(p, k, float(T[i]))))
+        return out
+
+    def sparse_tangent_csr(self, u: np.ndarray) -> Any:
+        """The tangent's sparse part (scipy CSR, n_dofs square): each loop's anchor tangent on
+        its anchors' representative nodes (each anchor's heaviest) alone. It stands for the
+        loop in the assembled matrix, which then stays regular where only the threads join
+        the tissue (a wound cut through); `low_rank` holds the rest."""
+        rows, cols, vals = [], [], []
+        for i, Ka in self._loop_tangents(u):
+            dofs = self._dofs(self._reps[i])
             rows.append(np.repeat(dofs, len(dofs)))
             cols.append(np.tile(dofs, len(dofs)))
-            vals.append(Kn.ravel())
+            vals.append(Ka.ravel())
+        if not vals:
+            return scipy.sparse.csr_matrix((self.n_dofs, self.n_dofs))
         K = scipy.sparse.coo_matrix(
             (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
             shape=(self.n_dofs, self.n_dofs),
@@ -204,12 +218,54 @@ class Cables:
         K.sum_duplicates()
         return K
 
+    def low_rank(self, u: np.ndarray) -> tuple[Any, np.ndarray]:
+        """The tangent less its sparse part, U diag(c) U^T: (U, scipy CSR n_dofs x r; c,
+        (r,)). Per loop, with Ka = V diag(lam) V^T its anchor tangent's eigenpairs of
+        non-zero eigenvalue (a loop's energy depends on its anchors' differences only: at
+        most 3 (A - 1)), the columns B^T V with lam and E^T V with -lam, B the weights' map
+        from nodes to anchor points and E the representatives'. Assembled, B^T Ka B would
+        couple every node of a loop to every other, a dense block the factorisation fills;
+        Newton takes this part by the Woodbury identity instead (`woundsweep.solver.newton`)."""
+        rows, cols, vals, cs = [], [], [], []
+        r = 0
+        for i, Ka in self._loop_tangents(u):
+            lam, V = np.linalg.eigh(Ka)
+            keep = np.abs(lam) > 1e-12 * max(float(np.abs(lam).max()), 1e-300)
+            m = int(keep.sum())
+            if m == 0:
+                continue
+            V = V[:, keep]
+            W = self._W[i]
+            for nodes, B, sign in (
+                (self._nodes[i], np.kron(W, np.eye(3)), 1.0),
+                (self._reps[i], np.eye(3 * len(W)), -1.0),
+            ):
+                dofs = self._dofs(nodes)
+                rows.append(np.repeat(dofs, m))
+                cols.append(np.tile(np.arange(r, r + m), len(dofs)))
+                vals.append((B.T @ V).ravel())
+                cs.append(sign * lam[keep])
+                r += m
+        if r == 0:
+            return scipy.sparse.csr_matrix((self.n_dofs, 0)), np.zeros(0)
+        U = scipy.sparse.coo_matrix(
+            (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+            shape=(self.n_dofs, r),
+        ).tocsr()
+        U.sum_duplicates()
+        return U, np.concatenate(cs)
+
+    def tangent_csr(self, u: np.ndarray) -> Any:
+        """d2Pi_c/du2 assembled (scipy CSR, n_dofs square): dense over each loop's nodes."""
+        U, c = self.low_rank(u)
+        return (self.sparse_tangent_csr(u) + U @ scipy.sparse.diags(c) @ U.T).tocsr()
+
     def coupling_pattern(self) -> Any:
-        """The tangent's structure (CSR of ones): each loop's nodes coupled to each other."""
+        """`sparse_tangent_csr`'s structure (CSR of ones): each loop's representatives."""
         if self._pattern is None:
             rows, cols = [], []
-            for nodes in self._nodes:
-                dofs = self._dofs(nodes)
+            for reps in self._reps:
+                dofs = self._dofs(reps)
                 rows.append(np.repeat(dofs, len(dofs)))
                 cols.append(np.tile(dofs, len(dofs)))
             r, c = np.concatenate(rows), np.concatenate(cols)

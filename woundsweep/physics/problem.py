@@ -6,7 +6,9 @@ or None for an unwounded patch) and the closure zone's tangential tie
 (`woundsweep.contact.ZoneTie`) into the `woundsweep.solver.NonlinearProblem` protocol. The
 contact and tie terms are added while the penalty is on (``contact.k_V_kPa > 0``; the tie only
 once set); the sutures' threads (``cables``, `woundsweep.contact.Cables`, None without) once
-tied, whatever the penalty; ``multipliers`` are the contact multipliers Newton carries there. The potential is
+tied, whatever the penalty: their tangent's sparse part into ``A``, the rest a low-rank term
+Newton takes apart (`low_rank`); ``multipliers`` are the contact multipliers Newton carries
+there. The potential is
 not used by Newton: that it exists (every load is dead) makes the tangent symmetric, and
 `tests/physics/test_stages_contact.py` checks R = dPi/du.
 
@@ -170,9 +172,18 @@ class WoundProblem:
         self._cables_in_pattern = False
 
     def _add_cables(self, M: PETSc.Mat) -> None:
-        """Add the threads' tangent to ``M``, unfinalised (nothing while they are untied)."""
+        """Add the threads' tangent's sparse part to ``M``, unfinalised (nothing while they
+        are untied)."""
         if self.cables is not None and self.cables.active:
-            add_csr(M, self.cables.tangent_csr(self.solution()), finalize=False)
+            add_csr(M, self.cables.sparse_tangent_csr(self.solution()), finalize=False)
+
+    def low_rank(self) -> tuple[Any, np.ndarray] | None:
+        """The tangent's part not in ``A``: (U, c) with J = A + U diag(c) U^T (the threads',
+        `Cables.low_rank`), or None."""
+        if self.cables is None or not self.cables.active:
+            return None
+        U, c = self.cables.low_rank(self.solution())
+        return (U, c) if len(c) else None
 
     @staticmethod
     def _structure_of(A: PETSc.Mat) -> Any:

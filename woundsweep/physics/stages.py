@@ -345,6 +345,9 @@ def stability(model: WoundModel, rows: np.ndarray, k_V_kPa: float) -> dict[str, 
         model.problem.jacobian(A)
         ai, aj, av = A.getValuesCSR()
         K = scipy.sparse.csr_matrix((av, aj, ai), shape=A.getSize())
+        lr = model.problem.low_rank()
+        if lr is not None:  # the threads' tangent, kept out of A
+            K = (K + lr[0] @ scipy.sparse.diags(lr[1]) @ lr[0].T).tocsr()
         try:
             eig = float(lowest_eigenvalues(K, free)[0])
         except ArithmeticError:

@@ -32,6 +32,7 @@ __all__ = [
     "SurfacePatch",
     "SutureState",
     "bite_points",
+    "closest_approach",
     "measure_state",
     "surface_gaps",
     "surface_patch",
@@ -106,6 +107,42 @@ def surface_gaps(model: WoundModel) -> tuple[np.ndarray, np.ndarray]:
     y = d.X[pairs[:, 0], 1]
     order = np.argsort(y)
     return y[order], (x[pairs[:, 1]] - x[pairs[:, 0]])[order]
+
+
+def closest_approach(
+    model: WoundModel, ys: np.ndarray, window_mm: float, depth_mm: float
+) -> np.ndarray:
+    """Per y in ``ys``: the walls' closest approach (mm) within ``window_mm`` of it along the
+    wound and ``depth_mm`` of the surface (reference positions) at the current state. Where
+    the right wall is near a point of the left one, the contact's normal gap (a signed
+    distance to the right wall's deformed surface, so the flanks' slip along the wound does
+    not bias it); elsewhere, and where no contact is modelled, the zone's mirror pairs' gap
+    across the wound (x_R - x_L)."""
+    d, line = model.domain, model.closure_line
+    assert line is not None, "a fusiform excision's model has a closure line"
+    X, u = d.X, model.u
+    top = d.z_top - depth_mm - 1e-9
+    x = X[:, 0] + u.reshape(-1, 3)[:, 0]
+    pairs = line.pairs[X[line.pairs[:, 0], 2] >= top]
+    py, pgap = X[pairs[:, 0], 1], x[pairs[:, 1]] - x[pairs[:, 0]]
+    cy, cgap = np.zeros(0), np.zeros(0)
+    c = model.contact
+    if c is not None:
+        nodes = c.passes[0].nodes  # the left flank's points
+        g = c.gaps(u)[: len(nodes)]
+        keep = np.isfinite(g) & (X[nodes, 2] >= top)
+        cy, cgap = X[nodes[keep], 1], g[keep]
+    out = np.empty(len(ys))
+    for k, y in enumerate(np.asarray(ys, dtype=float)):
+        near = np.abs(cy - y) <= window_mm
+        if near.any():
+            out[k] = float(cgap[near].min())
+            continue
+        near = np.abs(py - y) <= window_mm
+        if not near.any():  # a window narrower than the pairs' spacing: the nearest pair
+            near = np.abs(py - y) == np.abs(py - y).min()
+        out[k] = float(pgap[near].min())
+    return out
 
 
 def measure_state(

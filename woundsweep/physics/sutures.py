@@ -46,6 +46,7 @@ from .stages import contact_ramp, run_stage
 from .suture_measures import (
     SurfacePatch,
     SutureState,
+    closest_approach,
     measure_state,
     surface_gaps,
     surface_patch,
@@ -67,8 +68,9 @@ TIGHTEN_STEPS = 12
 # The knots' first pull: this fraction of the largest apposition force (tightened threads pull
 # their flank with 2 T, about 1.3-1.6 times the apposition force).
 FIRST_PULL_PER_APPOSITION = 0.7
-# The knots are pulled until the widest gap under a suture is within AIM_TOLERANCE of the target
-# from AIM times it: one gap, not anywhere below the target, so that the pull is determined.
+# The knots are pulled until the walls' widest closest approach under a suture is within
+# AIM_TOLERANCE of the target from AIM times it: one gap, not anywhere below the target, so
+# that the pull is determined.
 AIM = 0.8
 AIM_TOLERANCE = 0.05
 # A trial that does not converge is retried this many times, halfway back to the last that did.
@@ -132,6 +134,7 @@ class SuturedClosure:
         self.tracks_mm: np.ndarray = np.zeros((0, 2, 2, 3))  # (suture, flank, entry/exit, xyz)
         self.shortening_mm = np.zeros(0)  # per loop: how much shorter than at apposition, mm
         self.knot_tension_mN: float | None = None  # the one pull the knots were tied with
+        self.radius_mm = ANCHOR_RADIUS_mm  # the threads' anchor radius (`thread`)
 
     @property
     def domain(self) -> WoundDomain:
@@ -261,7 +264,8 @@ class SuturedClosure:
         """Close the wound by threads from the stage-2 state (module docstring): every loop
         tied at its length there, the zone's Dirichlet condition released while the flank
         contact is ramped in; then, with ``apposed_gap_mm``, every knot pulled with one tension
-        until the widest gap under a suture is just below that, and held there
+        until the walls meet under every suture (the widest of their closest approaches,
+        `approach_at_sutures`, just below that), and held there
         (`_pull_until_apposed`; `TIGHTEN_STEPS` trials at most, the status `NOT_APPOSED` if
         none lands)."""
         if self.closed_u is None:
@@ -279,6 +283,7 @@ class SuturedClosure:
             ]
         )  # fmt: skip
         cables = Cables(d.X, [suture_loop(d, t, radius_mm) for t in tracks], material.EA_mN)
+        self.radius_mm = float(radius_mm)
         self.cables, self.tracks_mm, self.positions_mm = cables, tracks, ys
         self._shares = None
         m.attach_cables(cables)
@@ -315,9 +320,10 @@ class SuturedClosure:
         return run_load_step(m, step).solve
 
     def _pull_until_apposed(self, ys: Sequence[float], target_mm: float) -> tuple[str, int]:
-        """Every knot pulled with one tension, the smallest that brings the widest gap under
-        a suture to `AIM` x ``target_mm`` (within `AIM_TOLERANCE` x it), then held: each loop
-        tied at its length there. (status, Newton steps)."""
+        """Every knot pulled with one tension, the smallest that brings the widest of the
+        walls' closest approaches under the sutures to `AIM` x ``target_mm`` (within
+        `AIM_TOLERANCE` x it), then held: each loop tied at its length there. (status, Newton
+        steps)."""
         assert self.cables is not None and self.closed_u is not None
         apposed = self.cables.lengths(self.closed_u)
         aim, tol = AIM * target_mm, AIM_TOLERANCE * target_mm
@@ -331,13 +337,11 @@ class SuturedClosure:
                 its += int(res.iterations)
                 if res.status == StageStatus.CONVERGED:
                     break
-                if good is None:
-                    return res.status, its
-                t = 0.5 * (t + good)
+                t = 0.5 * (t + good) if good is not None else 0.5 * t
             else:
                 return res.status, its
             good = t
-            g = float(self.gaps_at_sutures().max())
+            g = float(self.approach_at_sutures().max())
             history.append((t, g))
             if abs(g - aim) <= tol:
                 status = StageStatus.CONVERGED
@@ -348,6 +352,13 @@ class SuturedClosure:
         assert self.cables.rest_mm is not None
         self.shortening_mm = apposed - self.cables.rest_mm
         return status, its
+
+    def approach_at_sutures(self) -> np.ndarray:
+        """Under each suture, the walls' closest approach within the closure zone (mm,
+        `closest_approach`): within the anchor radius of its needle track along the wound."""
+        return closest_approach(
+            self.model, np.asarray(self.positions_mm, float), self.radius_mm, self.bite_depth_mm
+        )
 
     def gaps_at_sutures(self) -> np.ndarray:
         """The surface gap at each suture's y in the current state (mm)."""

@@ -3,23 +3,23 @@ regions the threads pull on (docs/model.md, "Sutures as threads").
 
 A simple interrupted suture enters the skin a bite width b from the wound's edge, runs
 through the flank along the needle track to the wall at the bite depth, crosses the wound and
-returns symmetrically through the other flank; its knot closes the loop above the skin. The
-thread lies in the track and pulls on the tissue along it, so each flank's anchor is the
-tissue within a radius r of the whole track (`needle_track`, `track_anchor`), coupled by the
-weights
+returns symmetrically through the other flank; its knot closes the loop above the skin. A
+thread that slides in a straight track pulls on the tissue only where it turns: where it
+enters the skin (the knot's strand lies on the skin, crossing the wound) and where it leaves
+the wall (the buried strand crosses beneath). So a suture is a closed loop through four
+anchors (`suture_loop`), the entry and the wall exit of each flank's needle track
+(`needle_track`), each the tissue within a radius r of its point (`point_anchor`), coupled by
+the weights
 
     w_k = int phi N_k dV / int phi dV,   phi = (1 - (rho / r)^2)^2 for rho < r,
 
-rho the distance from the track, N_k the displacement's basis functions: the anchor point is
-the phi-weighted mean of the deformed positions around the track (a distributing coupling,
-as an RBE3 element), so the pull spreads along the track as the thread in it spreads it, no
-node is held, and the weights do not depend on the mesh beyond the integral's error (a grid
-of points `GRID_PER_RADIUS` to a radius, so meshes coarser than r still see the region).
-
-A suture is then a closed loop through its two anchors (`suture_loop`): two strands cross the
-wound (the knot's above, the buried one below), the thread slides freely so both carry one
-tension T (`woundsweep.contact.cable`), and the suture pulls each flank toward the other
-with 2 T.
+rho the distance from the point, N_k the displacement's basis functions: the anchor point is
+the phi-weighted mean of the deformed positions around it (a distributing coupling, as an
+RBE3 element), so the pull spreads over the tissue the thread bears on, no node is held, and
+the weights do not depend on the mesh beyond the integral's error (a grid of points
+`GRID_PER_RADIUS` to a radius, so meshes coarser than r still see the region). The thread
+slides freely, so the whole loop carries one tension T (`woundsweep.contact.cable`); its two
+crossing strands pull each flank toward the other with 2 T, the knot's at the skin.
 """
 
 from __future__ import annotations
@@ -39,11 +39,11 @@ if TYPE_CHECKING:
 __all__ = [
     "ANCHOR_RADIUS_mm",
     "needle_track",
+    "point_anchor",
     "suture_loop",
     "GRID_PER_RADIUS",
     "NYLON_4_0",
     "SutureThread",
-    "track_anchor",
 ]
 
 ANCHOR_RADIUS_mm = 1.0
@@ -79,14 +79,6 @@ class SutureThread:
 NYLON_4_0 = SutureThread("4-0 nylon", 0.175, 2.0e6, (10.0, 15.0))
 
 
-def _segment_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    ab = b - a
-    if float(ab @ ab) == 0.0:
-        return np.linalg.norm(p - a, axis=1)
-    t = np.clip(((p - a) @ ab) / float(ab @ ab), 0.0, 1.0)
-    return np.linalg.norm(p - (a + t[:, None] * ab), axis=1)
-
-
 def _basis(lam: np.ndarray, degree: int) -> np.ndarray:
     """(p, 4 or 10) Lagrange basis at barycentric coordinates ``lam`` (p, 4), DOLFINx order."""
     if degree == 1:
@@ -98,25 +90,21 @@ def _basis(lam: np.ndarray, degree: int) -> np.ndarray:
     return out
 
 
-def track_anchor(
-    domain: WoundDomain,
-    entry: np.ndarray,
-    exit_: np.ndarray,
-    side: int,
-    radius_mm: float = ANCHOR_RADIUS_mm,
+def point_anchor(
+    domain: WoundDomain, point: np.ndarray, side: int, radius_mm: float = ANCHOR_RADIUS_mm
 ) -> Anchor:
-    """The anchor of the needle track from ``entry`` to ``exit_`` (reference coordinates,
-    mm) in the flank on ``side`` of the wound (-1: x < x_c, +1: x > x_c): the nodes and
-    weights of the module docstring. ValueError if no tissue lies within the radius."""
-    a, b = np.asarray(entry, dtype=float), np.asarray(exit_, dtype=float)
+    """The anchor at ``point`` (reference coordinates, mm) in the flank on ``side`` of the
+    wound (-1: x < x_c, +1: x > x_c): the nodes and weights of the module docstring.
+    ValueError if no tissue lies within the radius."""
+    a = np.asarray(point, dtype=float)
     h = radius_mm / GRID_PER_RADIUS
-    lo, hi = np.minimum(a, b) - radius_mm, np.maximum(a, b) + radius_mm
-    # The grid is centred on the track's midpoint, so that mirror-image tracks get mirror-image
-    # grids (and weights) and a symmetric placement keeps the problem symmetric.
-    mid, half = 0.5 * (a + b), 0.5 * np.abs(b - a) + radius_mm
-    axes = [mid[k] + h * (np.arange(-(half[k] // h) - 1, half[k] // h + 1) + 0.5) for k in range(3)]
+    lo, hi = a - radius_mm, a + radius_mm
+    # The grid is centred on the point, so that mirror-image points get mirror-image grids
+    # (and weights) and a symmetric placement keeps the problem symmetric.
+    offsets = h * (np.arange(-(radius_mm // h) - 1, radius_mm // h + 1) + 0.5)
+    axes = [a[k] + offsets for k in range(3)]
     grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
-    rho = _segment_distance(grid, a, b)
+    rho = np.linalg.norm(grid - a, axis=1)
     keep = (rho < radius_mm) & (side * (grid[:, 0] - domain.x_c) > 0)
     grid, rho = grid[keep], rho[keep]
     phi = (1.0 - (rho / radius_mm) ** 2) ** 2
@@ -125,7 +113,7 @@ def track_anchor(
     near = np.all((Xv.max(axis=1) >= lo) & (Xv.min(axis=1) <= hi), axis=1)
     cand = np.flatnonzero(near)
     if len(cand) == 0 or len(grid) == 0:
-        raise ValueError("no tissue within the anchor radius of the needle track")
+        raise ValueError("no tissue within the anchor radius of the thread's turn")
     X0 = domain.X[domain.cell_vertices[cand, 0]]
     Dinv = domain.Dm_inv[cand]
     cell = np.full(len(grid), -1, dtype=np.int64)
@@ -144,7 +132,7 @@ def track_anchor(
         lam[sl] = np.column_stack([1.0 - sel.sum(axis=1), sel])
     inside = best >= -1e-9
     if not inside.any():
-        raise ValueError("no tissue within the anchor radius of the needle track")
+        raise ValueError("no tissue within the anchor radius of the thread's turn")
     nodes_per_cell = domain.cell_nodes[cand[cell[inside]]]
     N = _basis(lam[inside], domain.degree) * phi[inside, None]
     nodes, inv = np.unique(nodes_per_cell.ravel(), return_inverse=True)
@@ -171,9 +159,12 @@ def needle_track(
 def suture_loop(
     domain: WoundDomain, track: np.ndarray, radius_mm: float = ANCHOR_RADIUS_mm
 ) -> list[Anchor]:
-    """One suture's loop (module docstring): the anchors of its left and right needle tracks
+    """One suture's loop (module docstring) through the anchors of its turns, in the
+    thread's order: the left entry, the left wall exit, the right wall exit, the right entry
     (``track`` from `needle_track`)."""
     return [
-        track_anchor(domain, track[0, 0], track[0, 1], -1, radius_mm),
-        track_anchor(domain, track[1, 1], track[1, 0], 1, radius_mm),
+        point_anchor(domain, track[0, 0], -1, radius_mm),
+        point_anchor(domain, track[0, 1], -1, radius_mm),
+        point_anchor(domain, track[1, 1], 1, radius_mm),
+        point_anchor(domain, track[1, 0], 1, radius_mm),
     ]

@@ -13,6 +13,10 @@ Under ``Policy.residual_rule`` = False (the contact stages) the residual may gro
 step of the semi-smooth contact Newton overshoots penalty forces it corrects at the next step,
 so only inversion and the strain limit shrink gamma there.
 
+A problem may keep part of its tangent out of the assembled matrix, as a low-rank term
+(``low_rank``: J = A + U diag(c) U^T); Newton factorises A alone and solves by the Woodbury
+identity (`woundsweep.solver.lowrank`).
+
 A problem may carry variables beside u that Newton updates with each step: its
 ``multipliers`` (a `Multipliers`, e.g. `woundsweep.contact.ContactMultipliers`, the contact
 stages' semi-smooth step), or None.
@@ -46,7 +50,7 @@ from __future__ import annotations
 import logging
 import math
 import time
-from typing import Any, NamedTuple, Protocol
+from typing import NamedTuple, Protocol
 
 import numpy as np
 from petsc4py import PETSc
@@ -54,6 +58,8 @@ from petsc4py import PETSc
 from ..config.solver import NewtonSettings
 from ..core.schema import StageStatus
 from .dirichlet import Dirichlet
+from .lowrank import LowRankUpdate
+from .multipliers import NO_MULTIPLIERS, Multipliers
 from .symmetry import Subspace, SymmetryBasis
 
 __all__ = ["Multipliers", "NewtonResult", "NewtonSolver", "NonlinearProblem", "Policy"]
@@ -93,66 +99,6 @@ class Policy(NamedTuple):
         the stage's start (a penetrating start's penalty forces must not set the tolerance),
         and the semi-smooth step's overshoots allowed (no residual rule)."""
         return cls(settings, fixed_scale=True, symmetric=True, residual_rule=False)
-
-
-class Multipliers(Protocol):
-    """Variables a problem carries beside u, updated by Newton with each step."""
-
-    def reset(self) -> None:
-        """Start of a stage: forget every earlier solve."""
-        ...
-
-    def begin(self) -> None:
-        """Start of a solve."""
-        ...
-
-    def predict(self, du: np.ndarray) -> Any:
-        """At the current state, what u += gamma du would make of them (for `accept`)."""
-        ...
-
-    def accept(self, prediction: Any, gamma: float) -> None:
-        """Take the update u += gamma du that ``prediction`` was made for."""
-        ...
-
-    def snapshot(self) -> Any:
-        """Their current values (to `restore` after a rejected relaxation)."""
-        ...
-
-    def restore(self, saved: Any) -> None:
-        """Return to a `snapshot`."""
-        ...
-
-    def commit(self) -> None:
-        """A solve converged."""
-        ...
-
-
-class _NoMultipliers:
-    """The `Multipliers` of a problem that carries none."""
-
-    def reset(self) -> None:
-        pass
-
-    def begin(self) -> None:
-        pass
-
-    def predict(self, du: np.ndarray) -> None:
-        return None
-
-    def accept(self, prediction: Any, gamma: float) -> None:
-        pass
-
-    def snapshot(self) -> None:
-        return None
-
-    def restore(self, saved: Any) -> None:
-        pass
-
-    def commit(self) -> None:
-        pass
-
-
-_NONE = _NoMultipliers()
 
 
 class NonlinearProblem(Protocol):
@@ -237,6 +183,8 @@ class NewtonSolver:
         self.gamma = 1.0
         # The symmetric subspace (`set_symmetry`), or None: the full space.
         self._sub: Subspace | None = None
+        self._low_rank = getattr(problem, "low_rank", None)
+        self._woodbury: LowRankUpdate | None = None  # the current step's low-rank term
 
     def set_symmetry(self, basis: SymmetryBasis | None) -> None:
         """Solve the linear systems in the span of ``basis.P`` (`woundsweep.solver.symmetry`),
@@ -254,7 +202,7 @@ class NewtonSolver:
     @property
     def multipliers(self) -> Multipliers:
         """The problem's carried multipliers (no-ops for a problem without them)."""
-        return self.problem.multipliers or _NONE
+        return self.problem.multipliers or NO_MULTIPLIERS
 
     # -- pieces ---------------------------------------------------------------------------
 
@@ -307,7 +255,22 @@ class NewtonSolver:
             self._factored = True
         self.ksp.setUp()
         self.ksp.getPC().setUp()  # numeric factorisation now, so it is timed on its own
+        self._woodbury = None
+        lr = self._low_rank() if self._low_rank is not None else None
+        if lr is not None:
+            self._woodbury = LowRankUpdate(lr[0], lr[1], rows, rhs, self._apply_inverse)
         return t1 - t0, time.perf_counter() - t1
+
+    def _apply_inverse(self, rhs: np.ndarray) -> np.ndarray:
+        """A^-1 rhs with the current factors (in the symmetric subspace if set)."""
+        self.b.getArray()[:] = rhs
+        if self._sub is None:
+            self.ksp.solve(self.b, self.dx)
+        else:
+            self._sub.solve(self.ksp, self.b, self.dx)
+        if self.ksp.getConvergedReason() < 0:
+            return np.full(len(rhs), np.nan)
+        return self.dx.getArray(readonly=True).copy()
 
     def _linear_solve(self, rhs: np.ndarray) -> np.ndarray | None:
         """Solve with the current factors; None on failure or an inaccurate solution.
@@ -315,19 +278,19 @@ class NewtonSolver:
         A (near-)singular tangent can factorise without a MUMPS error and give a finite but
         meaningless answer, so the true residual ||A du - b|| is checked (one product).
         """
-        self.b.getArray()[:] = rhs
-        if self._sub is None:
-            self.ksp.solve(self.b, self.dx)
-        else:
-            self._sub.solve(self.ksp, self.b, self.dx)
-        if self.ksp.getConvergedReason() < 0:
-            return None
-        du = self.dx.getArray(readonly=True).copy()
+        du = self._apply_inverse(rhs)
+        wb = self._woodbury
+        if wb is not None:
+            du = wb.correct(du)
         if not np.all(np.isfinite(du)):
             return None
         check = self.b.duplicate()
+        self.dx.getArray()[:] = du
         self.A.mult(self.dx, check)
-        err = np.linalg.norm(check.getArray(readonly=True) - rhs)
+        Adu = check.getArray(readonly=True).copy()
+        if wb is not None:
+            Adu += wb.apply(du)
+        err = np.linalg.norm(Adu - rhs)
         # A symmetric step cannot remove the right-hand side's antisymmetric part (rounding
         # of a symmetric state, relatively large only where the residual is near zero); a
         # problem that is not symmetric leaves a larger error and fails.

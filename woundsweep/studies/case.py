@@ -110,16 +110,18 @@ class Cost(NamedTuple):
 
 class ThreadRun(NamedTuple):
     """The case closed by threads (`SuturedClosure.thread`), every knot drawn with one
-    tension until the edges meet under every suture, and the case's load after closure."""
+    tension until the walls meet under every suture, and the case's load after closure."""
 
     status: str  # "converged", or `NOT_APPOSED` if no trial's tension landed on the aim
     sutured: SutureState  # suture_force_mN: each thread's tension
     pull_mN: np.ndarray  # each thread's pull on a flank toward the wound (about 2 T)
     apposition_mN: np.ndarray  # the stage-2 Dirichlet pull over each suture's stretch
     shortening_mm: np.ndarray  # how much shorter than at apposition each loop is tied
-    gap_at_suture_mm: np.ndarray
+    gap_at_suture_mm: np.ndarray  # the surface gap under each suture
+    approach_mm: np.ndarray  # the walls' closest approach under each (the tying rule's)
     loaded: LoadRun
     solves: int
+    view_state: ViewState | None = None  # the closed state for view.html (`run_case(view=True)`)
 
 
 class CaseResult(NamedTuple):
@@ -292,7 +294,9 @@ def run_case(
         t = timed("compare", 3, t)
     threaded = None
     if threads:
-        threaded = run_threads(case, mesh, spec.lens(), echo)
+        threaded = run_threads(case, mesh, spec.lens(), echo, view)
+        if shown is not None and threaded.view_state is not None:
+            shown = shown._replace(states=[*shown.states, threaded.view_state])
         t = timed("threads", threaded.solves, t)
     check = None
     if mesh_check:
@@ -315,10 +319,13 @@ def run_case(
     )  # fmt: skip
 
 
-def run_threads(case: ClinicalCase, mesh: Any, lens: Any, echo: Callable[[str], None]) -> ThreadRun:
+def run_threads(
+    case: ClinicalCase, mesh: Any, lens: Any, echo: Callable[[str], None], view: bool = False
+) -> ThreadRun:
     """The case's wound closed by threads on ``mesh`` (a model of its own: the footprints'
-    tie and the threads do not share one), every knot drawn with one tension until the widest
-    surface gap under a suture is just below `OPEN_GAP_mm`, then the case's load after closure."""
+    tie and the threads do not share one), every knot drawn with one tension until the walls
+    meet under every suture (their widest closest approach just below `OPEN_GAP_mm`), then the
+    case's load after closure; with ``view`` the closed state for view.html."""
     sc = SuturedClosure(
         mesh, lens, case.zone_depth_fraction, SolverSettings(element_degree=case.element_degree)
     )
@@ -335,14 +342,16 @@ def run_threads(case: ClinicalCase, mesh: Any, lens: Any, echo: Callable[[str], 
     if st.state is None:
         raise CaseNotSolved(f"threads: {st.status}")
     pull, gaps, short = sc.thread_pull(), sc.gaps_at_sutures(), sc.shortening_mm.copy()
+    approach = sc.approach_at_sutures()
+    seen = capture_state(sc, "closed by threads") if view else None
     load = case.load_at(case.itch_to_wound_deg)
     done = sc.itch(load, ITCH_STEPS)
     for j, step in enumerate(done, 1):
         echo(f"  load {j}/{ITCH_STEPS}: {step.status} ({step.newton_iterations} Newton steps)")
     solves = 2 + len(done) + 1
     return ThreadRun(
-        st.status, st.state, pull, appose, short, gaps,
-        LoadRun(load, case.to_wound_deg(load), done), solves,
+        st.status, st.state, pull, appose, short, gaps, approach,
+        LoadRun(load, case.to_wound_deg(load), done), solves, seen,
     )  # fmt: skip
 
 

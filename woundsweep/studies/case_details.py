@@ -153,10 +153,10 @@ def details(result: CaseResult) -> list[str]:
 def limits(result: CaseResult) -> list[str]:
     """The report's "Limits of the model" bullets."""
     threads = (
-        ["- **Threads.** The threads (Sutures as threads) pull through the tissue around their "
-         "needle tracks; the needle's hole, the knot's geometry and friction in the tracks and "
+        ["- **Threads.** The threads (Sutures as threads) pull on the tissue around the points "
+         "where they turn; the needle's hole, the knot's geometry and friction in the tracks and "
          "between the walls are not modelled; every knot is drawn with one tension, the "
-         "smallest that brings the edges together under every suture, so the threads' "
+         "smallest under which the walls meet under every suture, so the threads' "
          "tensions differ only under the load after closure."]
         if result.threads is not None
         else []

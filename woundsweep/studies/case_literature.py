@@ -181,7 +181,7 @@ def literature_section(result: CaseResult) -> list[str]:
         ends = (T[0] + T[-1]) / 2
         tr_ratio = f"{T.max() / ends:.1f}" if len(T) >= 3 else "n/a (fewer than 3)"
         lines.append(
-            f"| this case | FE, threads drawn until the edges meet (tension) "
+            f"| this case | FE, threads drawn until the walls meet (tension) "
             f"| {c.length_mm:g} x {c.width:.3g} | {T.min():.3g}-{T.max():.3g} | {tr_ratio} |"
         )
     lines += [

@@ -45,17 +45,19 @@ def threads_section(result: CaseResult) -> list[str]:
         "## Sutures as threads",
         "",
         f"The same wound closed by {NYLON_4_0.name} threads: each suture a loop through the "
-        f"tissue within {ANCHOR_RADIUS_mm:g} mm of its two needle tracks (from the skin, "
-        f"{result.case.sutures.bite_width_mm:g} mm from the edge, to the wall at the bite "
-        "depth), every knot drawn with one tension, the smallest that brings the edges "
-        f"together under every suture (the widest gap {AIM * OPEN_GAP_mm:g} mm, open above "
-        f"{OPEN_GAP_mm:g} mm), then tied. The threads' tensions are equal by that rule until "
+        f"tissue within {ANCHOR_RADIUS_mm:g} mm of the points where the thread turns (in each "
+        f"flank its entry into the skin, {result.case.sutures.bite_width_mm:g} mm from the "
+        "edge, and its exit from the wall at the bite depth), every knot drawn with one "
+        "tension, the smallest under which the walls meet "
+        "under every suture (their closest approach over the bite depth at most "
+        f"{AIM * OPEN_GAP_mm:g} mm; open is above {OPEN_GAP_mm:g} mm), then tied. The "
+        "table gives the surface gap left under each suture. The threads' tensions are equal by that rule until "
         "the load after closure; what differs between the sutures is the apposition force "
         "(what holds the edges together over each suture's stretch of wound when they are "
         "held shut, the forces above) and how far each knot had to be drawn.",
         "",
         "| suture | y (mm) | thread tension | pull on a flank (mN) | apposition force (mN) "
-        "| knot drawn in by (mm) | gap under it (mm) | tension under the load (mN) |",
+        "| knot drawn in by (mm) | surface gap under it (mm) | tension under the load (mN) |",
         "|---|---|---|---|---|---|---|---|",
     ]
     for i, y in enumerate(st.suture_y_mm):
@@ -71,7 +73,8 @@ def threads_section(result: CaseResult) -> list[str]:
     lines += [""]
     if tr.status == NOT_APPOSED:
         lines.append(
-            "No knot tension within the trials allowed brought the widest gap to the aim: the "
+            "No knot tension within the trials allowed brought the walls together under every "
+            "suture: the "
             "table gives the last state reached."
         )
     lines += [
@@ -115,6 +118,7 @@ def threads_summary(result: CaseResult) -> dict[str, Any]:
             "apposition_force_mN": tr.apposition_mN.tolist(),
             "knot_shortening_mm": tr.shortening_mm.tolist(),
             "gap_at_suture_mm": tr.gap_at_suture_mm.tolist(),
+            "closest_approach_mm": tr.approach_mm.tolist(),
             "gap_between_max_mm": _between(tr)[0],
             "contact_pressure_max_kPa": float(tr.sutured.contact_pressure_kPa.max()),
             "tension_under_load_mN": None if last is None else last.suture_force_mN.tolist(),

@@ -3,7 +3,7 @@
 The slit patch (two-layer skin, normal skin, orientation 0, a slit of near-zero width through
 its whole thickness and length) is closed by stages 1-2 (the walls held on x = 0: each half in
 its homogeneous pre-stretched state). Then ``n`` sutures evenly spaced along the slit, each a
-thread through the tissue around its two needle tracks (`woundsweep.physics.thread`), are tied
+thread through the tissue around the points where it turns (`woundsweep.physics.thread`), are tied
 at that state and the walls' condition is released: the threads alone join the halves.
 
 Equilibrium of a half in x: the healthy-skin traction on its outer face pulls with f L (f =

@@ -109,3 +109,11 @@ def test_case_without_the_optional_solves_says_so(tmp_path: Path) -> None:
     assert th["pull_mN"] == pytest.approx([2 * t for t in th["tension_mN"]], rel=0.05)
     assert th["tension_mN"] == pytest.approx([th["tension_mN"][0]] * 3, rel=1e-6)  # one pull
     assert "## Sutures as threads" in report and "threads drawn until the walls meet" in report
+    # The bottom line draws on the threads: their tension under the load against the failure
+    # ranges, the gap between the stitches and the pressure under the bites.
+    bottom = report.split("## Bottom line")[1].split("\n## ")[0]
+    assert "**Tied as threads** (4-0 nylon)" in bottom
+    assert f"{max(th['bite_pressure_kPa']):.0f} kPa" in bottom
+    assert f"{th['gap_between_max_mm']:.2f} mm" in bottom
+    assert len(th["bite_pressure_kPa"]) == 3 and min(th["bite_pressure_kPa"]) > 0
+    assert len(th["bite_pressure_under_load_kPa"]) == 3

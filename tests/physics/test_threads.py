@@ -58,11 +58,11 @@ def tied():
     sc, case = _small_wound()
     step = sc.thread(case.sutures, radius_mm=0.75)
     assert step.status == "converged"
-    return sc, case, step.state
+    return sc, case, step.state, sc.bite_pressure()
 
 
 def test_a_thread_pulls_its_flank_with_twice_its_tension(tied) -> None:
-    sc, case, st = tied
+    sc, case, st, _ = tied
     T = st.suture_force_mN
     assert len(T) == 3 and np.all(T > 0)
     assert T[0] == pytest.approx(T[2], rel=1e-3)  # a mirror-symmetric placement
@@ -78,7 +78,7 @@ def test_a_thread_pulls_its_flank_with_twice_its_tension(tied) -> None:
 
 
 def test_the_tension_does_not_depend_on_the_threads_stiffness(tied) -> None:
-    sc, case, st = tied
+    sc, case, st, _ = tied
     stiffer = dataclasses.replace(NYLON_4_0, modulus_kPa=10 * NYLON_4_0.modulus_kPa)
     again = sc.thread(case.sutures, material=stiffer, radius_mm=0.75)
     assert again.status == "converged"
@@ -88,7 +88,7 @@ def test_the_tension_does_not_depend_on_the_threads_stiffness(tied) -> None:
 def test_the_knots_are_pulled_with_one_tension_until_the_edges_meet(tied) -> None:
     from woundsweep.physics.sutures import AIM, AIM_TOLERANCE
 
-    sc, case, untightened = tied
+    sc, case, untightened, loose_bites = tied
     step = sc.thread(case.sutures, radius_mm=0.75, apposed_gap_mm=0.1)
     assert step.status == "converged"
     # The walls meet under every suture, the widest of their closest approaches at the aim:
@@ -100,3 +100,8 @@ def test_the_knots_are_pulled_with_one_tension_until_the_edges_meet(tied) -> Non
     assert np.all(T > untightened.suture_force_mN)
     assert np.all(sc.shortening_mm > 0)
     assert sc.shortening_mm[0] == pytest.approx(sc.shortening_mm[2], rel=1e-3)
+    # Drawn tighter, the threads press harder on the tissue under their bites, the end
+    # sutures' alike.
+    bites = sc.bite_pressure()
+    assert np.all(loose_bites > 0) and np.all(bites > loose_bites)
+    assert bites[0] == pytest.approx(bites[2], rel=1e-3)

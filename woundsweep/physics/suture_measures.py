@@ -8,6 +8,10 @@ and the surface von Mises, and at the apices the dog-ear height.
   bin of the closure line's bins along y.
 - Surface von Mises: the cell value at `EDGE_OFFSET_mm` outside the wound's edge and below the
   surface, at `EDGE_POINTS` positions along the left edge (reference configuration).
+- Pressure under the bites: per suture, the largest compressive principal Cauchy stress
+  (-min eigenvalue, kPa, 0 if none is compressive) at the stress rule's points of the cells
+  whose reference centroid lies within the anchor radius of any of its thread's turns, on
+  the turn's side (`bite_pressure`).
 - Dog-ear height: at each apex the largest rise u_z of the top surface's nodes within one wound
   width of it, above the far field (the median u_z of the top nodes on the x faces).
 """
@@ -32,6 +36,7 @@ __all__ = [
     "SurfacePatch",
     "SutureState",
     "bite_points",
+    "bite_pressure",
     "closest_approach",
     "measure_state",
     "surface_gaps",
@@ -142,6 +147,26 @@ def closest_approach(
         if not near.any():  # a window narrower than the pairs' spacing: the nearest pair
             near = np.abs(py - y) == np.abs(py - y).min()
         out[k] = float(pgap[near].min())
+    return out
+
+
+def bite_pressure(model: WoundModel, tracks_mm: np.ndarray, radius_mm: float) -> np.ndarray:
+    """Per suture (``tracks_mm`` (n, 2, 2, 3) from `needle_track`), the pressure under its
+    bites (module docstring; kPa). The thread's load is spread over the anchor radius, so
+    this is the tissue's stress at that spread, not under the 0.2 mm thread itself."""
+    d = model.domain
+    centroid = d.X[d.cell_vertices].mean(axis=1)
+    sigma = model.forms.stress_tensor_samples().cauchy  # (cells, k, 3, 3)
+    out = np.zeros(len(tracks_mm))
+    for i, track in enumerate(np.asarray(tracks_mm, dtype=float)):
+        near = np.zeros(len(centroid), dtype=bool)
+        for side, flank in zip((-1.0, 1.0), track):
+            on_side = side * (centroid[:, 0] - d.x_c) > 0
+            for point in flank:
+                near |= on_side & (np.linalg.norm(centroid - point, axis=1) < radius_mm)
+        if near.any():
+            lowest = np.linalg.eigvalsh(sigma[near])[..., 0]
+            out[i] = max(0.0, -float(np.nanmin(lowest)))
     return out
 
 

@@ -46,6 +46,7 @@ from .stages import contact_ramp, run_stage
 from .suture_measures import (
     SurfacePatch,
     SutureState,
+    bite_pressure,
     closest_approach,
     measure_state,
     surface_gaps,
@@ -359,6 +360,13 @@ class SuturedClosure:
         return closest_approach(
             self.model, np.asarray(self.positions_mm, float), self.radius_mm, self.bite_depth_mm
         )
+
+    def bite_pressure(self) -> np.ndarray:
+        """Per thread, the pressure under its bites at the current state (kPa,
+        `bite_pressure`)."""
+        if self.cables is None:
+            raise RuntimeError("thread() first")
+        return bite_pressure(self.model, self.tracks_mm, self.radius_mm)
 
     def gaps_at_sutures(self) -> np.ndarray:
         """The surface gap at each suture's y in the current state (mm)."""

@@ -119,6 +119,8 @@ class ThreadRun(NamedTuple):
     shortening_mm: np.ndarray  # how much shorter than at apposition each loop is tied
     gap_at_suture_mm: np.ndarray  # the surface gap under each suture
     approach_mm: np.ndarray  # the walls' closest approach under each (the tying rule's)
+    bite_pressure_kPa: np.ndarray  # the largest compressive stress under each one's bites
+    loaded_bite_pressure_kPa: np.ndarray | None  # the same at the load's end (None: not reached)
     loaded: LoadRun
     solves: int
     view_state: ViewState | None = None  # the closed state for view.html (`run_case(view=True)`)
@@ -342,16 +344,18 @@ def run_threads(
     if st.state is None:
         raise CaseNotSolved(f"threads: {st.status}")
     pull, gaps, short = sc.thread_pull(), sc.gaps_at_sutures(), sc.shortening_mm.copy()
-    approach = sc.approach_at_sutures()
+    approach, bites = sc.approach_at_sutures(), sc.bite_pressure()
     seen = capture_state(sc, "closed by threads") if view else None
     load = case.load_at(case.itch_to_wound_deg)
     done = sc.itch(load, ITCH_STEPS)
     for j, step in enumerate(done, 1):
         echo(f"  load {j}/{ITCH_STEPS}: {step.status} ({step.newton_iterations} Newton steps)")
     solves = 2 + len(done) + 1
+    reached = len(done) == ITCH_STEPS and done[-1].status == StageStatus.CONVERGED
     return ThreadRun(
-        st.status, st.state, pull, appose, short, gaps, approach,
-        LoadRun(load, case.to_wound_deg(load), done), solves, seen,
+        st.status, st.state, pull, appose, short, gaps, approach, bites,
+        sc.bite_pressure() if reached else None, LoadRun(load, case.to_wound_deg(load), done),
+        solves, seen,
     )  # fmt: skip
 
 

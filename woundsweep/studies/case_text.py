@@ -21,7 +21,7 @@ from .case_literature import (
     literature_section,
     ours,
 )
-from .case_threads import threads_section
+from .case_threads import threads_bottom_line, threads_section
 from .case_verdict import LoadVerdict, Verdict, carry_least, carry_most, verdict
 
 __all__ = ["render"]
@@ -136,6 +136,7 @@ def _bottom_line(result: CaseResult, v: Verdict) -> list[str]:
             f"degrees to the wound): {w.to_wound_deg:g} degrees ({w.to_langer_deg:g} to the Langer "
             f"line), the largest suture force {newtons(w.peak_force_mN)}; it {opens}."
         )
+    lines += threads_bottom_line(result)
     lines.append(f"- **Mesh**: {mesh_line(result)}")
     o = ours(result)
     size = (
@@ -144,10 +145,19 @@ def _bottom_line(result: CaseResult, v: Verdict) -> list[str]:
         if o.below_reported > 1
         else "the largest force here lies within the forces reported"
     )
+    what = (
+        "The forces above hold the edges together at each suture, not a thread's tension"
+        if result.threads is None
+        else (
+            "The forces above hold the edges together at each suture; the threads' tension, "
+            f"{newtons(result.threads.sutured.suture_force_mN.max())}, is "
+            f"{SMALLEST_REPORTED_PEAK_N * 1e3 / result.threads.sutured.suture_force_mN.max():.1f} "
+            "times below the smallest peak reported"
+        )
+    )
     lines.append(
         f"- **Against the literature** {size}; reported suture forces span about "
-        f"{REPORTED_RANGE_N[0]:g}-{REPORTED_RANGE_N[1]:g} N. The model gives the force that "
-        "holds the edges together at each suture, not the thread's tension, with Table 2's "
+        f"{REPORTED_RANGE_N[0]:g}-{REPORTED_RANGE_N[1]:g} N. {what}, with Table 2's "
         "soft facial-skin parameters (below)."
     )
     return lines

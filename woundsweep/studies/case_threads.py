@@ -155,6 +155,18 @@ def threads_section(result: CaseResult) -> list[str]:
                 else "."
             )
         )
+        lv = load_verdict(st, tr.loaded)
+        if lv.opens:
+            lines.append(
+                f"The flanks part first at {where(lv.opened)}, from load step "
+                f"{lv.first_step}/{lv.steps}."
+            )
+        elif lv.grows is not None:
+            gy_, before, after = lv.grows
+            lines.append(
+                f"Nothing closed after tying opens; the gap grows most at y = {y_mm(gy_)} mm, "
+                f"{before:.3f} -> {after:.3f} mm."
+            )
     return lines
 
 

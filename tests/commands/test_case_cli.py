@@ -47,9 +47,10 @@ def test_case_writes_its_report(tmp_path: Path) -> None:
     soft, stiff = (data["band"][k]["suture_force_mN"] for k in ("soft", "stiff"))
     assert all(a < b < c for a, b, c in zip(soft, forces, stiff))
     check = data["mesh_check"]
-    assert (
-        check["mesh_size_factor"] == pytest.approx(8 * 0.18) and len(check["relative_change"]) == 3
-    )
+    # At least 8 times the factor (the size law's halving), raised until the elements at the
+    # wound are half as large as the case's.
+    assert check["mesh_size_factor"] >= 8 * 0.18 and len(check["relative_change"]) == 3
+    assert check["element_size_ratio_at_wound"] >= 2.0
     # The same wound along the Langer line.
     assert len(data["along_langer_force_mN"]) == 3
     for head in ("Bottom line", "Forces per suture", "Under the load after closure",

@@ -107,3 +107,19 @@ def test_refined_wound_mesh_keeps_its_zone() -> None:
     assert volumes(fine.points, fine.cells).sum() == pytest.approx(
         volumes(coarse.points, coarse.cells).sum(), rel=1e-12
     )
+
+
+def test_the_element_size_at_the_wound_halves_under_refinement() -> None:
+    from woundsweep.mesh.build import edge_length_near_mm
+
+    spec = GeometrySpec.wedge(1.0, 1.0, 4.0, 1.2, 0.6, 0.3)
+    coarse = build_mesh(spec)
+    fine = refine_uniform(coarse)
+    h0, h1 = edge_length_near_mm(coarse, spec), edge_length_near_mm(fine, spec)
+    # Corner children halve their parents' edges (the octahedron's cut adds a diagonal a
+    # little longer), and the cells within 1 mm of the wound are the finer ones there.
+    assert 1.8 < h0 / h1 < 2.25
+    # The cells near the wound are finer than the mesh's median (the size law grades away).
+    X, c = coarse.points, coarse.cells[:, :4]
+    every = np.median(np.linalg.norm(X[c[:, 0]] - X[c[:, 1]], axis=1))
+    assert h0 < every

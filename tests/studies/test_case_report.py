@@ -278,6 +278,14 @@ def test_the_mesh_line_gives_each_force_s_change() -> None:
     coarse = MeshLevel(1.44, 3375, np.array([98.0, 202.0, 98.0]), 0.5, 0.12)
     r = result(before, steps(before), check=coarse)  # 3,375 dofs: 1.5 times smaller
     assert "elements 1.5 times smaller" in sections(render(r, "c", [], verdict(r)))["Bottom line"]
+    # Where the check measured the element size at the wound, that ratio is the one stated.
+    measured = MeshLevel(4.0, 8000, np.array([98.0, 202.0, 98.0]), 0.5, 0.12, 2.07)
+    r2 = result(before, steps(before), check=measured)
+    assert (
+        "elements 2.1 times smaller at the wound the forces"
+        in sections(render(r2, "c", [], verdict(r2)))["Bottom line"]
+    )
+    assert _summary(r2, verdict(r2))["mesh_check"]["element_size_ratio_at_wound"] == 2.07
     gap = "the largest surface gap after closure is 0.120 mm (here 0.000 mm; open above 0.1 mm)"
     assert gap in s["Mesh uncertainty"]
     skipped = sections(render(result(before, steps(before)), "c", []))

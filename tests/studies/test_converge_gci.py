@@ -116,8 +116,8 @@ def test_element_sizes_must_match_the_values() -> None:
 def test_parse_factors() -> None:
     assert parse_factors("0.3,0.5,0.7,1,1.4") == [0.3, 0.5, 0.7, 1.0, 1.4]
     for text, msg in [("0.3,0.5", "at least 3"), ("0.3,x,1", "numbers"),
-                      ("0.3,0.7,0.5", "increase"), ("0.3,0.7,2.5", "in \\(0, 2\\]"),
-                      ("0,0.5,1", "in \\(0, 2\\]")]:  # fmt: skip
+                      ("0.3,0.7,0.5", "increase"), ("0.3,0.7,8.5", "in \\(0, 8\\]"),
+                      ("0,0.5,1", "in \\(0, 8\\]")]:  # fmt: skip
         with pytest.raises(WoundsweepError, match=msg) as exc:
             parse_factors(text)
         assert exc.value.exit_code == 2 and "\n" not in str(exc.value)
@@ -130,7 +130,7 @@ def test_level_factors() -> None:
     for args, text in [((0.3, 2, 1.5), "expected 3"), ((0.3, 3, 1.0), "at least 1.05"),
                        ((0.3, 3, 1.0000000000000002), "at least 1.05"),
                        ((0.3, 11, 1.05), "to 10"), ((0.3, 5000, 1.5), "to 10"),
-                       ((0.01, 10, 2.0), "passes 2"), ((0.5, 5, 1.5), "reach 2.53 > 2")]:  # fmt: skip
+                       ((0.01, 10, 3.0), "passes 8"), ((0.5, 5, 2.1), "reach 9.72 > 8")]:  # fmt: skip
         with pytest.raises(WoundsweepError, match=text) as exc:
             level_factors(*args)
         assert exc.value.exit_code == 2 and "\n" not in str(exc.value)

@@ -615,7 +615,7 @@ _CASE_BAD = {
     "--itch-to-wound-deg": ("nan", "-181", "x"),
     "--itch-kind": ("twist",),
     "--element": ("3", "0", "x"),
-    "--mesh-factor": ("nan", "0", "2.5", "x"),
+    "--mesh-factor": ("nan", "0", "8.5", "x"),
 }
 
 

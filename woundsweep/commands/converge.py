@@ -155,7 +155,7 @@ def _check_cells(
 )  # fmt: skip
 @click.option(
     "--factors", "factors_text", default=None, metavar="LIST",
-    help="The levels' mesh size factors instead, increasing, up to 2, e.g. 0.3,0.5,0.7,1,1.4 "
+    help="The levels' mesh size factors instead, increasing, up to 8, e.g. 0.3,0.5,0.7,1,1.4 "
     "(the paper's factors and two finer levels).",
 )  # fmt: skip
 @click.option(

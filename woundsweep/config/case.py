@@ -10,10 +10,10 @@ the load after closure and the numerical settings, each default written once her
 - The closure zone (the walls the sutures hold): the whole length, down to the bite depth.
 - The solver's element (`SolverSettings.element_degree`, P2: docs/model.md "Element", P1's
   closing force keeps falling with refinement) at mesh size factor `MESH_SIZE_FACTOR`; the
-  mesh check re-solves on a mesh `MESH_CHECK_FACTOR` times finer (element sizes scale with
-  (0.5 / m)^(1/3), `woundsweep.mesh.sizing`: 8 times the factor halves the size field; gmsh
-  follows it loosely on the case's coarse meshes, so the report states the ratio the meshes'
-  dofs give, about 1.4 on the 2 cm case).
+  mesh check re-solves on a mesh of at least `MESH_CHECK_FACTOR` times the factor (element
+  sizes scale with (0.5 / m)^(1/3), `woundsweep.mesh.sizing`: 8 times the factor halves the
+  size field), raised until the realised element size at the wound is halved (gmsh keeps
+  the case's coarse meshes finer than their field; `woundsweep.studies.case`).
 - The site: its layer thicknesses and the band of skin parameters the forces are given
   within (`SITES`); the skin type chosen is the band's central value.
 - The load after closure: by default across the wound (`ITCH_TO_WOUND_deg`), whatever the

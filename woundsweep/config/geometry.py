@@ -44,8 +44,10 @@ __all__ = [
 
 SHAPES = ("cylindrical", "wedge", "fusiform")
 # The finest mesh size factor a mesh can have. A sweep's grid takes factors in (0, 1];
-# `woundsweep converge` refines up to this one, to extrapolate past the grid's finest.
-FINEST_FACTOR = 2.0
+# `woundsweep converge` refines past it to extrapolate, and a case's mesh check needs up to
+# about 4 to halve the realised element size at a clinical wound (`MAX_CELLS` bounds the
+# meshes either way).
+FINEST_FACTOR = 8.0
 # Every length of a geometry (mm), and how far apart its largest and smallest may be: the
 # shipped sweeps span 0.08-36 mm and ratios up to about 25, a clinical case about 500.
 LENGTH_RANGE_MM = (0.01, 1000.0)

@@ -13,7 +13,7 @@ __all__, __getattr__, __dir__ = lazy_exports(
     __name__,
     {
         "sizing": ("PAPER_CELL_CAP", "SIZE_LAW", "mesh_size_mm"),
-        "build": ("MeshData", "build_mesh"),
+        "build": ("MeshData", "build_mesh", "edge_length_near_mm"),
         "cache": ("CachedMesh", "get_mesh", "load_mesh", "mesh_checksum", "mesh_path", "save_mesh"),
         "refine": ("refine_uniform",),
     },

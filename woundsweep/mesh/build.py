@@ -20,7 +20,7 @@ from contextlib import contextmanager
 import gmsh
 import numpy as np
 
-from ..config.geometry import GeometrySpec
+from ..config.geometry import GeometrySpec, wound_distance_mm
 from ..core.errors import GeometryError
 from ..core.schema import (
     BOTTOM,
@@ -45,7 +45,7 @@ from .sizing import (
     wound_size,
 )
 
-__all__ = ["MeshData", "build_mesh", "signed_volumes"]
+__all__ = ["MeshData", "build_mesh", "edge_length_near_mm", "signed_volumes"]
 
 
 # gmsh keeps global state: one build at a time per process.
@@ -322,6 +322,28 @@ def signed_volumes(points: np.ndarray, cells: np.ndarray) -> np.ndarray:
         np.einsum("ij,ij->i", np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), p[:, 3] - p[:, 0])
         / 6.0
     )
+
+
+def edge_length_near_mm(mesh: MeshData, spec: GeometrySpec, within_mm: float = 1.0) -> float:
+    """The median over the cells whose centroid lies within ``within_mm`` of the wound's
+    surface of their mean edge length (mm): the element size where the wound's loads act.
+    (gmsh keeps a mesh finer than its size field where the layers are thinner than it, so
+    the realised size is measured, not read from the law.)"""
+    X = np.asarray(mesh.points)
+    corners = np.asarray(mesh.cells)[:, :4]
+    centroid = X[corners].mean(axis=1)
+    if spec.shape == "fusiform":
+        distance = spec.lens().distance
+        dist = np.array([distance(*c) for c in centroid])
+    else:
+        dist = np.array([wound_distance_mm(spec, c[0], c[2]) for c in centroid])
+    near = dist < within_mm
+    if not near.any():
+        raise GeometryError(f"{spec.describe()}: no cell within {within_mm:g} mm of the wound")
+    pairs = ((0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3))
+    p = X[corners[near]]
+    edges = np.mean([np.linalg.norm(p[:, i] - p[:, j], axis=1) for i, j in pairs], axis=0)
+    return float(np.median(edges))
 
 
 def build_mesh(spec: GeometrySpec) -> MeshData:

@@ -62,6 +62,8 @@ SCAN_STEPS = 2
 # `--converge`: two more meshes, each this much finer (mesh size factor) than the last:
 # element sizes 1.31 times smaller per level.
 CONVERGE_RATIO = 2.25
+# The mesh check's meshes tried at most until the element size at the wound is halved.
+CHECK_MESHES = 4
 
 
 class MeshLevel(NamedTuple):
@@ -72,6 +74,7 @@ class MeshLevel(NamedTuple):
     suture_force_mN: np.ndarray
     dog_ear_height_mm: float
     gap_max_mm: float = float("nan")  # the largest surface gap after suturing
+    h_ratio: float = float("nan")  # the case mesh's element size at the wound over this one's
 
 
 class CaseNotSolved(SolverError):
@@ -192,7 +195,7 @@ def run_case(
     (`CONVERGE_RATIO`), with ``view`` the sutured state's fields (and the load's end's) for
     view.html (`case_view`), with ``threads`` the closure by threads (`run_threads`);
     CaseNotSolved if a solve does not converge."""
-    from ..mesh.build import build_mesh
+    from ..mesh.build import build_mesh, edge_length_near_mm
 
     t0 = time.perf_counter()
     costs: dict[str, Cost] = {}
@@ -302,7 +305,7 @@ def run_case(
         t = timed("threads", threaded.solves, t)
     check = None
     if mesh_check:
-        check = _level(case, min(MESH_CHECK_FACTOR * case.mesh_size_factor, FINEST_FACTOR), echo)
+        check = _level(case, *_check_mesh(case, edge_length_near_mm(mesh, spec), echo))
         t = timed("mesh check", 3, t)
     levels = [
         MeshLevel(case.mesh_size_factor, sc.domain.n_dofs, sutured.suture_force_mN,
@@ -312,7 +315,7 @@ def run_case(
         m = case.mesh_size_factor * CONVERGE_RATIO**k
         if m > FINEST_FACTOR:
             break
-        levels.append(_level(case, m, echo))
+        levels.append(_level(case, m, echo=echo))
     if converge:
         timed("converge", 3 * (len(levels) - 1), t)
     return CaseResult(
@@ -359,16 +362,44 @@ def run_threads(
     )  # fmt: skip
 
 
-def _level(case: ClinicalCase, m: float, echo: Callable[[str], None]) -> MeshLevel:
-    """The sutured closure of ``case`` on the mesh of factor ``m``."""
+def _check_mesh(
+    case: ClinicalCase, h_mm: float, echo: Callable[[str], None]
+) -> tuple[float, Any, float]:
+    """The mesh check's factor, mesh and element-size ratio at the wound (``h_mm``: the case
+    mesh's, `edge_length_near_mm`): from `MESH_CHECK_FACTOR` times the case's factor, which
+    halves the size law's field, raised until the realised size is halved too (gmsh keeps a
+    coarse mesh finer than its field where the layers are thin), up to `FINEST_FACTOR`."""
+    from ..mesh.build import build_mesh, edge_length_near_mm
+
+    m = min(MESH_CHECK_FACTOR * case.mesh_size_factor, FINEST_FACTOR)
+    for _ in range(CHECK_MESHES):
+        spec = case.geometry(m)
+        mesh = build_mesh(spec)
+        ratio = h_mm / edge_length_near_mm(mesh, spec)
+        if ratio >= 2.0 or m >= FINEST_FACTOR:
+            break
+        # h ~ m^(-1/3) in the law; aim a little past the halving.
+        m = min(FINEST_FACTOR, m * (1.05 * 2.0 / ratio) ** 3)
+    return m, mesh, ratio
+
+
+def _level(
+    case: ClinicalCase,
+    m: float,
+    mesh: Any = None,
+    h_ratio: float = float("nan"),
+    echo: Callable[[str], None] = print,
+) -> MeshLevel:
+    """The sutured closure of ``case`` on the mesh of factor ``m`` (``mesh``: built already)."""
     from ..mesh.build import build_mesh
 
     spec = case.geometry(m)
     sc = SuturedClosure(
-        build_mesh(spec), spec.lens(), case.zone_depth_fraction,
+        build_mesh(spec) if mesh is None else mesh, spec.lens(), case.zone_depth_fraction,
         SolverSettings(element_degree=case.element_degree),
     )  # fmt: skip
-    echo(f"mesh check: m = {m:.4g}, {sc.domain.n_dofs} dofs")
+    finer = f", elements {h_ratio:.2f} times smaller at the wound" if h_ratio == h_ratio else ""
+    echo(f"mesh check: m = {m:.4g}, {sc.domain.n_dofs} dofs{finer}")
     steps = sc.close(
         JobMaterials.table2(case.skin_type, case.orientation_deg), case.orientation_deg
     )
@@ -380,7 +411,7 @@ def _level(case: ClinicalCase, m: float, echo: Callable[[str], None]) -> MeshLev
         raise CaseNotSolved(f"m = {m:.4g}: sutures {st.status}")
     return MeshLevel(
         m, sc.domain.n_dofs, st.state.suture_force_mN, st.state.dog_ear_height_mm,
-        float(st.state.gap_mm.max()),
+        float(st.state.gap_mm.max()), h_ratio,
     )  # fmt: skip
 
 

@@ -22,10 +22,18 @@ def mesh_change(result: CaseResult) -> np.ndarray | None:
 
 
 def _h_ratio(result: CaseResult, fine: MeshLevel) -> float:
-    """How many times smaller the check's elements are, from the meshes themselves: the dofs
-    of a tetrahedral mesh grow as h^-3. (gmsh follows the size field loosely on coarse
-    meshes, so the factor's nominal ratio overstates the refinement.)"""
+    """How many times smaller the check's elements are, from the meshes themselves: at the
+    wound (`edge_length_near_mm`) where the check measured it, otherwise from the dofs, which
+    grow as h^-3. (gmsh follows the size field loosely on coarse meshes, so the factor's
+    nominal ratio overstates the refinement.)"""
+    if np.isfinite(fine.h_ratio):
+        return float(fine.h_ratio)
     return float((fine.dofs / result.dofs) ** (1 / 3))
+
+
+def _smaller(result: CaseResult, fine: MeshLevel) -> str:
+    where = " at the wound" if np.isfinite(fine.h_ratio) else ""
+    return f"{_h_ratio(result, fine):.2g} times smaller{where}"
 
 
 def mesh_line(result: CaseResult) -> str:
@@ -35,9 +43,8 @@ def mesh_line(result: CaseResult) -> str:
             "the mesh check was skipped (`--no-mesh-check`): this report does not state how "
             "much the forces depend on the mesh."
         )
-    r = _h_ratio(result, result.mesh_check)
     return (
-        f"with elements {r:.2g} times smaller the forces change by "
+        f"with elements {_smaller(result, result.mesh_check)} the forces change by "
         f"{100 * d.min():+.1f} to {100 * d.max():+.1f} % (largest {100 * np.abs(d).max():.1f} %)."
     )
 
@@ -65,7 +72,7 @@ def mesh_section(result: CaseResult) -> list[str]:
     else:
         m = result.case.mesh_size_factor
         lines.append(
-            f"Solved again with elements {_h_ratio(result, fine):.2g} times smaller (mesh size factor "
+            f"Solved again with elements {_smaller(result, fine)} (mesh size factor "
             f"{m:g} -> {fine.mesh_size_factor:g}): each suture's force changes by "
             f"{', '.join(f'{100 * x:+.1f}' for x in d)} %; the dog-ears by "
             f"{100 * (fine.dog_ear_height_mm / result.sutured.dog_ear_height_mm - 1):+.1f} %"

@@ -100,6 +100,9 @@ def _summary(result: CaseResult, v: Verdict) -> dict[str, Any]:
             "dofs": result.mesh_check.dofs,
             "suture_force_mN": np.asarray(result.mesh_check.suture_force_mN).tolist(),
             "gap_max_mm": result.mesh_check.gap_max_mm,
+            "element_size_ratio_at_wound": (
+                float(result.mesh_check.h_ratio) if np.isfinite(result.mesh_check.h_ratio) else None
+            ),
             "relative_change": None if d is None else d.tolist(),
         }
     if len(result.levels) > 1:

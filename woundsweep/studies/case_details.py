@@ -73,7 +73,7 @@ def mesh_section(result: CaseResult) -> list[str]:
         m = result.case.mesh_size_factor
         lines.append(
             f"Solved again with elements {_smaller(result, fine)} (mesh size factor "
-            f"{m:g} -> {fine.mesh_size_factor:g}): each suture's force changes by "
+            f"{m:g} -> {fine.mesh_size_factor:.3g}): each suture's force changes by "
             f"{', '.join(f'{100 * x:+.1f}' for x in d)} %; the dog-ears by "
             f"{100 * (fine.dog_ear_height_mm / result.sutured.dog_ear_height_mm - 1):+.1f} %"
             + (

@@ -305,7 +305,8 @@ def run_case(
         t = timed("threads", threaded.solves, t)
     check = None
     if mesh_check:
-        check = _level(case, *_check_mesh(case, edge_length_near_mm(mesh, spec), echo))
+        m_check, fine, ratio = _check_mesh(case, edge_length_near_mm(mesh, spec))
+        check = _level(case, m_check, echo, fine, ratio)
         t = timed("mesh check", 3, t)
     levels = [
         MeshLevel(case.mesh_size_factor, sc.domain.n_dofs, sutured.suture_force_mN,
@@ -315,7 +316,7 @@ def run_case(
         m = case.mesh_size_factor * CONVERGE_RATIO**k
         if m > FINEST_FACTOR:
             break
-        levels.append(_level(case, m, echo=echo))
+        levels.append(_level(case, m, echo))
     if converge:
         timed("converge", 3 * (len(levels) - 1), t)
     return CaseResult(
@@ -362,9 +363,7 @@ def run_threads(
     )  # fmt: skip
 
 
-def _check_mesh(
-    case: ClinicalCase, h_mm: float, echo: Callable[[str], None]
-) -> tuple[float, Any, float]:
+def _check_mesh(case: ClinicalCase, h_mm: float) -> tuple[float, Any, float]:
     """The mesh check's factor, mesh and element-size ratio at the wound (``h_mm``: the case
     mesh's, `edge_length_near_mm`): from `MESH_CHECK_FACTOR` times the case's factor, which
     halves the size law's field, raised until the realised size is halved too (gmsh keeps a
@@ -386,9 +385,9 @@ def _check_mesh(
 def _level(
     case: ClinicalCase,
     m: float,
+    echo: Callable[[str], None],
     mesh: Any = None,
     h_ratio: float = float("nan"),
-    echo: Callable[[str], None] = print,
 ) -> MeshLevel:
     """The sutured closure of ``case`` on the mesh of factor ``m`` (``mesh``: built already)."""
     from ..mesh.build import build_mesh
@@ -398,7 +397,7 @@ def _level(
         build_mesh(spec) if mesh is None else mesh, spec.lens(), case.zone_depth_fraction,
         SolverSettings(element_degree=case.element_degree),
     )  # fmt: skip
-    finer = f", elements {h_ratio:.2f} times smaller at the wound" if h_ratio == h_ratio else ""
+    finer = f", elements {h_ratio:.2f} times smaller at the wound" if np.isfinite(h_ratio) else ""
     echo(f"mesh check: m = {m:.4g}, {sc.domain.n_dofs} dofs{finer}")
     steps = sc.close(
         JobMaterials.table2(case.skin_type, case.orientation_deg), case.orientation_deg

@@ -145,16 +145,15 @@ def _bottom_line(result: CaseResult, v: Verdict) -> list[str]:
         if o.below_reported > 1
         else "the largest force here lies within the forces reported"
     )
-    what = (
-        "The forces above hold the edges together at each suture, not a thread's tension"
-        if result.threads is None
-        else (
-            "The forces above hold the edges together at each suture; the threads' tension, "
-            f"{newtons(result.threads.sutured.suture_force_mN.max())}, is "
-            f"{SMALLEST_REPORTED_PEAK_N * 1e3 / result.threads.sutured.suture_force_mN.max():.1f} "
-            "times below the smallest peak reported"
+    what = "The forces above hold the edges together at each suture"
+    if result.threads is None:
+        what += ", not a thread's tension"
+    else:
+        knot = float(result.threads.sutured.suture_force_mN.max())
+        what += (
+            f"; the threads' tension, {newtons(knot)}, is "
+            f"{SMALLEST_REPORTED_PEAK_N * 1e3 / knot:.1f} times below the smallest peak reported"
         )
-    )
     lines.append(
         f"- **Against the literature** {size}; reported suture forces span about "
         f"{REPORTED_RANGE_N[0]:g}-{REPORTED_RANGE_N[1]:g} N. {what}, with Table 2's "

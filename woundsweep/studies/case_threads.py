@@ -37,7 +37,7 @@ def _between(tr: ThreadRun) -> tuple[float, float]:
 
 def threads_bottom_line(result: CaseResult) -> list[str]:
     """The bottom line's bullet on the threads (empty without them): the knot tension, the
-    thread that rises most under the load against the tear-through and breaking ranges, the
+    thread that carries most under the load against the tear-through and breaking ranges, the
     gap between the stitches and the pressure under the bites."""
     tr = result.threads
     if tr is None:
@@ -67,7 +67,8 @@ def threads_bottom_line(result: CaseResult) -> list[str]:
         k = int(np.argmax(last.suture_force_mN))
         peak = float(last.suture_force_mN[k])
         out.append(
-            f", and the thread at y = {y_mm(st.suture_y_mm[k])} mm carries most, {newtons(peak)}, {TEAR_THROUGH.low_N * 1e3 / peak:.0f} times below "
+            f", and the thread at y = {y_mm(st.suture_y_mm[k])} mm carries most, "
+            f"{newtons(peak)}, {TEAR_THROUGH.low_N * 1e3 / peak:.0f} times below "
             f"the {TEAR_THROUGH.low_N:.1f} N at which nylon tears through a skin model and "
             f"{NYLON_4_0.breaking_force_N[0] * 1e3 / peak:.0f} times below the "
             f"{NYLON_4_0.breaking_force_N[0]:g} N at which {NYLON_4_0.name} breaks"

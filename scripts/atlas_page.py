@@ -23,6 +23,7 @@ from typing import Any
 
 from woundsweep.analysis.closures import closure_rows, closure_summary
 from woundsweep.config.manifest import load_run
+from woundsweep.execution.summary import busy_seconds
 from woundsweep.store.packed import read_packed
 
 MARK = "<!-- written by hand below -->"
@@ -53,7 +54,7 @@ def _pct(a: float, b: float) -> str:
 
 def charted(table: Path, run: Path) -> dict[str, Any]:
     """What the packed table holds: jobs, rows, converged rows, jobs through six stages per
-    orientation, CPU time and the table's size."""
+    orientation, CPU time, the wall time while jobs ran and the table's size."""
     t, meta = read_packed(table)
     df = t.to_pandas()
     jobs = df.groupby("job_id").first()
@@ -62,6 +63,7 @@ def charted(table: Path, run: Path) -> dict[str, Any]:
         float(o): (int(six.loc[g.index].sum()), len(g)) for o, g in jobs.groupby("orientation_deg")
     }
     cpu = float(jobs["total_cpu_time_s"].sum())
+    busy = busy_seconds(jobs["started_at_utc"], jobs["finished_at_utc"])
     return {
         "jobs": len(jobs),
         "total": len(load_run(run).manifest),
@@ -70,6 +72,7 @@ def charted(table: Path, run: Path) -> dict[str, Any]:
         "six": by_orient,
         "cpu_h": cpu / 3600,
         "cpu_per_job": cpu / max(len(jobs), 1),
+        "wall_h": busy / 3600,
         "bytes": table.stat().st_size,
         "sweep": meta.get("sweep"),
     }
@@ -271,7 +274,8 @@ def page(run: Path, table_path: Path, beside: list[Path]) -> tuple[str, dict[str
 What is charted: {c["jobs"]:,} of the {c["total"]:,} jobs of `sweeps/paper.yaml`
 ({_pct(c["jobs"], c["total"])}; P2, the `{load}` closure), whole shards of 486 taken in a fixed
 random order, so the charted share is a random sample of the grid's shards. CPU:
-{c["cpu_h"]:.1f} CPU-hours, {c["cpu_per_job"]:.1f} s a job. The results are kept in
+{c["cpu_h"]:.1f} CPU-hours, {c["cpu_per_job"]:.1f} s a job; {c["wall_h"]:.1f} hours of wall time
+while jobs ran, on this project's machine (two cores, shared). The results are kept in
 `{table_path.as_posix()}` ({c["bytes"] / 1e6:.2f} MB); `make chart` continues from it
 (`charted/README.md`).
 

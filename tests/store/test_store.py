@@ -27,7 +27,7 @@ from woundsweep.core.diagnostics import StageDiagnostics, StageReport
 from woundsweep.core.errors import StoreError
 from woundsweep.core.schema import FailureClass, StageResult
 from woundsweep.execution.shards import estimate_cost
-from woundsweep.execution.summary import summarize
+from woundsweep.execution.summary import busy_seconds, summarize
 from woundsweep.store.reader import DIAGNOSTIC_FIELDS, STAGE_FIELDS, read_results, result_schema
 from woundsweep.store.solverfile import SolverOutput, read_solver_file
 from woundsweep.store.writer import Store
@@ -277,3 +277,14 @@ def test_diagnostic_columns_round_trip_typed(empty_run: Path) -> None:
     bad = SolverOutput(empty_run, {}, {1: StageReport(result, {"future_mN": 1.0})})
     with pytest.raises(ValueError, match="future_mN"):
         Store(empty_run).write_job(job.to_dict(), outcome("converged", bad), (1, 1), "none", "0/1")
+
+
+def test_busy_time_is_the_union_of_the_jobs_intervals() -> None:
+    t = pd.Timestamp("2026-12-06T09:00:00", tz="UTC")
+    s = pd.Timedelta(seconds=1)
+    # Two overlapping jobs (0-10 s, 5-20 s), one inside them (6-8 s), a pause, then one more
+    # (100-130 s) and one without a finish time: 20 + 30 s of running over a 130 s span.
+    started = pd.Series([t, t + 5 * s, t + 6 * s, t + 100 * s, t + 40 * s])
+    finished = pd.Series([t + 10 * s, t + 20 * s, t + 8 * s, t + 130 * s, pd.NaT])
+    assert busy_seconds(started, finished) == 50.0
+    assert busy_seconds(started[:0], finished[:0]) == 0.0

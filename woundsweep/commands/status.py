@@ -77,7 +77,8 @@ def format_status(s: dict[str, Any]) -> str:
     rate = s["throughput_jobs_per_hour"]
     lines.append(
         f"throughput: {'n/a' if rate is None else f'{rate:.1f} jobs/h'}"
-        f" over {_duration(s['wall_span_s'])}"
+        f" over {_duration(s['wall_busy_s'])} while jobs ran"
+        f" ({_duration(s['wall_span_s'])} from the first job's start to the last one's end)"
     )
     lines.append(
         f"CPU time: {_duration(s['cpu_time_used_s'])} used,"

@@ -11,9 +11,24 @@ from ..core.schema import FailureClass, ResultState, StageStatus
 from ..store.reader import StoreScan
 from .shards import estimate_cost
 
-__all__ = ["summarize"]
+__all__ = ["busy_seconds", "summarize"]
 
 _BAD = (ResultState.CORRUPT, ResultState.DAMAGED)  # result states counted as damaged
+
+
+def busy_seconds(started: pd.Series, finished: pd.Series) -> float:
+    """The wall time (s) during which at least one job ran: the length of the union of the
+    intervals [started, finished] (jobs without both times left out)."""
+    t = pd.DataFrame({"a": pd.to_datetime(started), "b": pd.to_datetime(finished)}).dropna()
+    total, end = 0.0, None
+    for a, b in t.sort_values("a").itertuples(index=False):
+        if end is None or a > end:
+            total += max((b - a).total_seconds(), 0.0)
+            end = max(a, b)
+        elif b > end:
+            total += (b - end).total_seconds()
+            end = b
+    return total
 
 
 def summarize(
@@ -46,12 +61,14 @@ def summarize(
         for k, v in jobs["failed_stage"].dropna().value_counts().sort_index().items()
     }
     cpu_used = float(jobs["total_cpu_time_s"].sum()) if len(jobs) else 0.0
-    span = None
+    span = busy = None
     if len(jobs):
         t0 = jobs["started_at_utc"].min()
         t1 = jobs["finished_at_utc"].max()
         span = max((t1 - t0).total_seconds(), 0.0)
-    throughput = len(jobs) / span * 3600.0 if span else None
+        busy = busy_seconds(jobs["started_at_utc"], jobs["finished_at_utc"])
+    # Per hour of running, not of the span: a run charted in parts pauses between them.
+    throughput = len(jobs) / busy * 3600.0 if busy else None
     cpu_left = None
     if len(jobs) and cpu_used > 0:
         cost = pd.Series(estimate_cost(manifest), index=manifest["job_id"].to_numpy())
@@ -79,6 +96,7 @@ def summarize(
         "reopened_by_stage": reopened,
         "attempts": int(jobs["attempts"].sum()) if len(jobs) else 0,
         "wall_span_s": span,
+        "wall_busy_s": busy,
         "throughput_jobs_per_hour": throughput,
         "cpu_time_used_s": cpu_used,
         "cpu_time_left_estimate_s": cpu_left,

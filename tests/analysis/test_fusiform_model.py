@@ -121,31 +121,42 @@ def test_the_excisions_columns_enter_only_with_excisions(analyzed: Path) -> None
 
 def test_angle_weights_by_hand() -> None:
     meta = {"levels": {"fusiform": {"orientation_deg": [0.0, 30.0, 60.0, 90.0]}}}
+    # Linear in cos 2t: cos 120 = -1/2, cos 130 = -0.6428, cos 180 = -1.
+    w90 = (math.cos(math.radians(130)) + 0.5) / (-1 + 0.5)
+    assert w90 == pytest.approx(0.2856, abs=1e-4)
     assert angle_weights(meta, "fusiform", 65.0) == [
-        (60.0, pytest.approx(5 / 6)),
-        (90.0, pytest.approx(1 / 6)),
+        (60.0, pytest.approx(1 - w90)),
+        (90.0, pytest.approx(w90)),
+    ]
+    # Across a multiple of 90 deg cos 2t turns back: linear in the angle there.
+    wide = {"levels": {"fusiform": {"orientation_deg": [45.0, 135.0]}}}
+    assert angle_weights(wide, "fusiform", 60.0) == [
+        (45.0, pytest.approx(5 / 6)),
+        (135.0, pytest.approx(1 / 6)),
     ]
     assert angle_weights(meta, "fusiform", 30.0) == [(30.0, 1.0)]
     assert angle_weights(meta, "fusiform", 0.0) == [(0.0, 1.0)]
     assert angle_weights({"levels": {}}, "fusiform", 65.0) == [(65.0, 1.0)]
 
 
-def test_the_angle_to_the_langer_line_is_answered_linearly_between_trained_angles(
+def test_the_angle_to_the_langer_line_is_answered_linearly_in_cos_2t_between_trained_angles(
     analyzed: Path, run_main
 ) -> None:
     at = {a: answer(run_main, analyzed, *args(angle_to_langer=str(a))) for a in (0, 25, 30)}
     by_orientation = answer(run_main, analyzed, *args(orientation="65"))
     assert by_orientation["predictions"] == at[25]["predictions"]
     assert at[25]["orientation_deg"] == 65.0 and at[25]["angle_to_langer_deg"] == 25.0
+    # Angle 25 = orientation 65, weighted linearly in cos 2t between orientation 60 (angle
+    # 30, cos 2t = -1/2) and 90 (angle 0, cos 2t = -1).
+    w0 = (math.cos(math.radians(130)) + 0.5) / (-1 + 0.5)
     assert at[25]["orientation_weights"] == [
-        [60.0, pytest.approx(5 / 6)],
-        [90.0, pytest.approx(1 / 6)],
+        [60.0, pytest.approx(1 - w0)],
+        [90.0, pytest.approx(w0)],
     ]
-    # Angle 25 = orientation 65: 5/6 of the answer at orientation 60 (angle 30), 1/6 of 90 (0).
     (p0,), (p25,), (p30,) = (at[a]["predictions"] for a in (0, 25, 30))
-    log_mix = 5 / 6 * math.log(p30["stress_kPa"]) + 1 / 6 * math.log(p0["stress_kPa"])
+    log_mix = (1 - w0) * math.log(p30["stress_kPa"]) + w0 * math.log(p0["stress_kPa"])
     assert p25["stress_kPa"] == pytest.approx(math.exp(log_mix), rel=1e-9)
-    mix = 5 / 6 * np.array(p30["probabilities"]) + 1 / 6 * np.array(p0["probabilities"])
+    mix = (1 - w0) * np.array(p30["probabilities"]) + w0 * np.array(p0["probabilities"])
     assert p25["probabilities"] == pytest.approx(mix.tolist(), abs=1e-12)
     assert p25["quantile"] == int(np.argmax(mix)) + 1
     lo, hi = p25["interval_kPa"]

@@ -147,6 +147,25 @@ def test_gp_ignores_the_dermal_thickness_and_averages_its_replicates(fits) -> No
     )
 
 
+def test_gp_interpolates_the_orientation_in_cos_2t(fits) -> None:
+    """The truth moves with the orientation t as 0.3 cos 2t (`smooth_stress`, like every result
+    by the wound's symmetry): between the grid's 0, 45 and 90 deg the GP follows it, where an
+    interpolant linear in t would miss by 0.3 x 0.2 = 0.06 at 15 and 75 deg."""
+    _, X = _grid()
+    gp = fits["gp"].model
+    j = list(gp.features).index("orientation_deg")
+    sample = X[X[:, j] == 0.0][::10]
+    assert len(sample) > 300
+    base = gp.predict_log(sample)[0]
+    for t in (15.0, 30.0, 60.0, 75.0):
+        moved = sample.copy()
+        moved[:, j] = t
+        change = gp.predict_log(moved)[0] - base
+        truth = 0.3 * (math.cos(math.radians(2 * t)) - 1.0)
+        assert abs(np.mean(change) - truth) < 0.015, (t, np.mean(change), truth)
+    assert fits["gp"].metrics["gp"]["inputs"]["wedge"][-1] == "cos 2 orientation_deg"
+
+
 def test_gp_split_keeps_the_replicates_of_a_wound_together(fits) -> None:
     rows, _ = _grid()
     fit = fits["gp"]

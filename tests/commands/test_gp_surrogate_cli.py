@@ -104,7 +104,7 @@ def test_metrics_and_report_state_the_gp_and_the_off_grid_runs(runs: dict[str, P
     assert "Gaussian processes of log p99" in report and "Top three by Sobol total index" in report
     meta = json.loads((a / "surrogate_meta.json").read_text())
     assert meta["surrogate"] == "gp" and meta["calibration"] == s["calibration"]
-    assert json.loads((a / "surrogate.json").read_text())["format"] == "woundsweep-gp-surrogate/1"
+    assert json.loads((a / "surrogate.json").read_text())["format"] == "woundsweep-gp-surrogate/2"
 
 
 @pytest.fixture(scope="module")

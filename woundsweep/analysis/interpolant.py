@@ -5,9 +5,15 @@ carry no length, so at fixed dimensionless factors the stresses do not depend on
 ``dermal_thickness_mm`` is therefore no input, and rows that differ only in it are
 replicates, averaged into one point; their spread is the noise floor (solver and mesh noise).
 
+Symmetry: the wound and its layers are mirror-symmetric across and along the wound, and the
+stiff axis at orientation t is a line (t and t + 180 deg are one axis), so every result is an
+even, 180-degree-periodic function of t, that is a function of cos 2t: the orientation enters
+as cos 2t (`ANGLE_INPUTS`), which puts the grid's 0, 45 and 90 deg at 1, 0 and -1 and a wound
+between them where its stress lies between theirs.
+
 One GP per (wound shape, skin type, stage) group. Inputs: the shape's other model columns
-that vary in training, positive factors log-transformed, each scaled to [0, 1] over the
-training values (the orientation and the cylinder offset linearly). Kernel: constant x
+that vary in training, positive factors log-transformed, the orientation as cos 2t, each
+scaled to [0, 1] over the training values (the cylinder offset linearly). Kernel: constant x
 Matern(nu=2.5, one length per input) + white noise, on targets normalised per group. The
 hyperparameters maximise the log marginal likelihood (scikit-learn, L-BFGS-B from one fixed
 start) on at most `HYPER_POINTS` of the group's points; the posterior conditions on all.
@@ -33,7 +39,7 @@ from ..core.errors import AnalysisError
 from ..core.versions import GP_SURROGATE_FORMAT
 from .settings import SHAPE_CODES
 
-__all__ = ["HYPER_POINTS", "KERNEL", "GPSurrogate", "InputScale", "fit_gp"]
+__all__ = ["ANGLE_INPUTS", "HYPER_POINTS", "KERNEL", "GPSurrogate", "InputScale", "fit_gp"]
 
 # Columns that are no GP input: the group's keys, and t_d (scale invariance).
 NOT_INPUTS = ("wound_shape", "skin_type", "stage", "dermal_thickness_mm")
@@ -42,6 +48,8 @@ LOG_INPUTS = frozenset(
     {"subcutis_thickness_factor", "patch_size_factor", "wound_width_factor",
      "wound_depth_factor", "wound_length_factor", "mesh_size_factor"}
 )  # fmt: skip
+# Angles (degrees) of an axis, interpolated in cos 2t (the module docstring's symmetry).
+ANGLE_INPUTS = frozenset({"orientation_deg"})
 # Points per group the hyperparameters are fitted on (a seeded subsample beyond it).
 HYPER_POINTS = 256
 # Fewer points than this in a group train no GP.
@@ -63,8 +71,14 @@ class InputScale(NamedTuple):
 
     def apply(self, raw: np.ndarray) -> np.ndarray:
         """Raw column values (rows x ``names``) -> scaled inputs."""
-        v = np.where(np.asarray(self.log), np.log(np.where(self.log, raw, 1.0)), raw)
+        angle = np.array([n in ANGLE_INPUTS for n in self.names])
+        v = np.where(angle, _cos2(raw), raw)
+        v = np.where(np.asarray(self.log), np.log(np.where(self.log, v, 1.0)), v)
         return (v - np.asarray(self.low)) / (np.asarray(self.high) - np.asarray(self.low))
+
+
+def _cos2(deg: np.ndarray) -> np.ndarray:
+    return np.cos(np.radians(2.0 * np.asarray(deg, dtype=np.float64)))
 
 
 class Group(NamedTuple):
@@ -124,7 +138,7 @@ def shape_inputs(X: np.ndarray, features: Sequence[str], code: float) -> InputSc
     sub = X[X[:, list(features).index("wound_shape")] == code]
     cols: list[tuple[str, bool, float, float]] = []
     for j, name in enumerate(features):
-        v = sub[:, j]
+        v = _cos2(sub[:, j]) if name in ANGLE_INPUTS else sub[:, j]
         if name in NOT_INPUTS or not np.isfinite(v).all() or np.ptp(v) == 0:
             continue
         is_log = name in LOG_INPUTS and bool((v > 0).all())
@@ -238,7 +252,10 @@ class GPSurrogate:
             },  # fmt: skip
             "hyperparameter_points": HYPER_POINTS,
             "inputs": {
-                s: [f"log {n}" if lg else n for n, lg in zip(sc.names, sc.log)]
+                s: [
+                    f"log {n}" if lg else f"cos 2 {n}" if n in ANGLE_INPUTS else n
+                    for n, lg in zip(sc.names, sc.log)
+                ]  # fmt: skip
                 for s, sc in self.scales.items()
             },  # fmt: skip
             "noise_floor_log_sd": math.sqrt(ss / dof) if dof else None,

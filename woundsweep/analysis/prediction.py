@@ -3,10 +3,11 @@ stress estimate with its conformal interval (surrogate) and the failure probabil
 
 Values outside the training ranges are refused, or answered and flagged.
 
-The orientation is answered continuously: at an orientation between two trained ones (25
+The orientation t is answered continuously: at an orientation between two trained ones (25
 degrees on a 0/45/90 grid) every model is evaluated at both neighbours and the answers are
-weighted linearly in the angle (class probabilities, log stress, failure probability; the
-interval is the calibrated half-width around the weighted log stress). The tree models
+weighted linearly in cos 2t (`angle_weights`: every result is a function of cos 2t; class
+probabilities, log stress, failure probability; the interval is the calibrated half-width
+around the weighted log stress). The tree models
 alone are piecewise constant in the angle, with their steps at the trained values, so
 their own answer between two trained angles is one neighbour's, whichever side of a split it
 falls. A Gaussian-process surrogate (``continuous``) interpolates by itself: it is evaluated
@@ -214,7 +215,9 @@ def _check_params(
 def angle_weights(meta: dict[str, Any], shape: str, value: float) -> list[tuple[float, float]]:
     """The trained orientations an answer at ``value`` weighs, with their weights: the value
     itself (weight 1) on a trained orientation or outside the trained ones (or when the
-    orientations were too many to record), else its two neighbours, linearly in the angle."""
+    orientations were too many to record), else its two neighbours, linearly in cos 2t (every
+    result is a function of cos 2t: `interpolant`'s symmetry; linearly in t where the two
+    neighbours lie on both sides of a multiple of 90 deg)."""
     grid = meta.get("levels", {}).get(shape, {}).get(ANGLE)
     if not grid or not grid[0] < value < grid[-1]:
         return [(float(value), 1.0)]
@@ -222,8 +225,13 @@ def angle_weights(meta: dict[str, Any], shape: str, value: float) -> list[tuple[
     if np.min(np.abs(g - value)) <= 1e-9 * max(1.0, float(np.abs(g).max())):
         return [(float(value), 1.0)]
     k = int(np.searchsorted(g, value))
-    t = (value - g[k - 1]) / (g[k] - g[k - 1])
-    return [(float(g[k - 1]), float(1.0 - t)), (float(g[k]), float(t))]
+    a, b = g[k - 1], g[k]
+    if np.floor(a / 90.0) == np.ceil(b / 90.0) - 1:  # cos 2t is monotone on [a, b]
+        c = np.cos(np.radians(2.0 * np.array([a, value, b])))
+        t = (c[1] - c[0]) / (c[2] - c[0])
+    else:
+        t = (value - a) / (b - a)
+    return [(float(a), float(1.0 - t)), (float(b), float(t))]
 
 
 def interpolation_flags(meta: dict[str, Any], params: Mapping[str, Any]) -> list[str]:
@@ -240,7 +248,7 @@ def interpolation_flags(meta: dict[str, Any], params: Mapping[str, Any]) -> list
             flag = f"{name}={float(v):g} (interpolated between trained values {g[k - 1]:g} and {g[k]:g})"
             if name == ANGLE:
                 (_, wa), (_, wb) = angle_weights(meta, params["wound_shape"], float(v))
-                flag += f": their answers weighted {wa:.3g} and {wb:.3g}, linearly in the angle"
+                flag += f": their answers weighted {wa:.3g} and {wb:.3g}, linearly in cos 2t"
             out.append(flag)
     return out
 

@@ -310,7 +310,8 @@ def cmd(
     The orientation is --orientation (the stiff axis' angle to x) or --angle-to-langer DEG
     (the wound's long axis against the Langer line; orientation = 90 - DEG). Between two
     trained orientations the models are evaluated at both and their answers weighted
-    linearly in the angle (a Gaussian-process surrogate, `analyze --param surrogate=gp`, is
+    linearly in cos(2 x orientation), of which every result is a function by symmetry (a
+    Gaussian-process surrogate, `analyze --param surrogate=gp`, is
     evaluated at the angle itself). Other values between the trained grid values are
     answered by the models as they are and flagged as interpolated; values outside the trained ranges are
     refused unless --allow-extrapolation. Without --mesh-size-factor the answer is for the

@@ -36,5 +36,5 @@ MODEL_FORMAT = "woundsweep-quantile-model/1"
 SURROGATE_FORMAT = "woundsweep-stress-surrogate/2"
 # The Gaussian-process surrogate's own file (`woundsweep.analysis.interpolant`): per group its
 # kernel hyperparameters, training inputs and targets (no pickle; loading refits the posterior).
-GP_SURROGATE_FORMAT = "woundsweep-gp-surrogate/1"
+GP_SURROGATE_FORMAT = "woundsweep-gp-surrogate/2"
 FAILURE_FORMAT = "woundsweep-failure-model/1"

@@ -21,7 +21,7 @@ test-deps:
 # fixtures are built once; PYTEST_WORKERS=0 runs in one process.
 PYTEST_WORKERS ?= auto
 test: setup test-deps
-	$(PY) -m pytest -q -n $(PYTEST_WORKERS) --dist loadfile --durations=25 $(PYTEST_ARGS)
+	$(PY) -m pytest -q -n $(PYTEST_WORKERS) --dist loadfile --no-loadscope-reorder --durations=25 $(PYTEST_ARGS)
 
 # Tests that do not need DOLFINx (seconds).
 test-fast: setup

@@ -20,6 +20,34 @@ from pathlib import Path
 import pytest
 from cli_run import DEMO, PAPER, ForkCli, ws
 
+# A rough cost per test (s) by mark (`_OTHER` without either), to start the costly modules
+# first.
+_COST = {"slow": 60.0, "fem": 5.0}
+_OTHER = 0.2
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Modules in decreasing rough cost (`_COST`), each kept whole and in its own order.
+
+    With ``-n 2 --dist loadfile --no-loadscope-reorder`` (`make test`) the workers take the
+    modules in this order, so the few long ones start first and the many short ones fill in
+    at the end; xdist's own order (most tests first) starts the long ones last, and one
+    worker then runs alone while the other has finished.
+    """
+    cost: dict[str, float] = {}
+    first: dict[str, int] = {}
+    for i, item in enumerate(items):
+        module = item.nodeid.split("::")[0]
+        first.setdefault(module, i)
+        mark = next((m for m in _COST if item.get_closest_marker(m)), None)
+        cost[module] = cost.get(module, 0.0) + (_COST[mark] if mark else _OTHER)
+
+    def key(pair: tuple[int, pytest.Item]) -> tuple[float, int, int]:
+        module = pair[1].nodeid.split("::")[0]
+        return (-cost[module], first[module], pair[0])
+
+    items[:] = [item for _, item in sorted(enumerate(items), key=key)]
+
 
 @pytest.fixture(scope="session")
 def demo_run(tmp_path_factory: pytest.TempPathFactory) -> Path:

@@ -21,6 +21,7 @@ SMALL = [
 
 
 @pytest.mark.fem
+@pytest.mark.slow
 def test_case_writes_its_report(tmp_path: Path) -> None:
     out = tmp_path / "report"
     res = ws("case", "--out", str(out), *SMALL, "--converge", timeout=600)
@@ -65,6 +66,7 @@ def test_case_writes_its_report(tmp_path: Path) -> None:
 
 
 @pytest.mark.fem
+@pytest.mark.slow
 def test_case_without_the_optional_solves_says_so(tmp_path: Path) -> None:
     out = tmp_path / "report"
     skip = ["--no-even", "--no-compare", "--no-band", "--no-scan", "--no-mesh-check"]

@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from woundsweep.analysis.closures import closure_rows, closure_summary
+from woundsweep.analysis.report import p_text
 from woundsweep.config.manifest import load_run
 from woundsweep.execution.summary import busy_seconds
 from woundsweep.store.packed import read_packed
@@ -115,7 +116,7 @@ def _stiff(m: dict[str, Any], shape: str) -> str:
         return "no stiff/soft pairs charted"
     return (
         f"{100 * s['fraction_stiff_greater']:.1f} % ({s['stiff_greater']:,}/{s['pairs']:,}),"
-        f" p = {s['sign_test_p']:.2g}"
+        f" p {p_text(s['sign_test_p'], relation=True)}"
     )
 
 

@@ -176,6 +176,18 @@ def test_stiff_vs_soft_on_a_hand_built_table() -> None:
     assert c["sign_test_p"] == pytest.approx(2 * 0.5**2)
 
 
+def test_a_sign_test_beyond_float_range_reads_as_a_bound() -> None:
+    from scipy.stats import binomtest
+
+    from woundsweep.analysis.report import p_text
+
+    # 1,369 pairs all one way: 2 x 0.5^1369 ~ 1e-412 underflows to 0, which is no p-value.
+    p = float(binomtest(1369, 1369, 0.5).pvalue)
+    assert p == 0.0
+    assert p_text(p) == "< 1e-300" and p_text(p, relation=True) == "< 1e-300"
+    assert p_text(2 * 0.5**3, relation=True) == "= 0.25" and p_text(None) == "n/a"
+
+
 def test_normalised_locations_map_patch_corners() -> None:
     L, w, T = 3.0, 1.0, 2.0
     xs = [-L, L + w, w / 2, 0.0]

@@ -13,7 +13,18 @@ from .offgrid import coverage_text, cross_report_lines
 from .offgrid import report_lines as off_grid_report_lines
 from .profile_locations import report_lines as profile_report_lines
 
-__all__ = ["PAPER", "auc_text", "render_report", "summary", "write_report"]
+__all__ = ["PAPER", "auc_text", "p_text", "render_report", "summary", "write_report"]
+
+
+def p_text(p: float | None, relation: bool = False) -> str:
+    """A p-value for the page: "n/a" for none, "< 1e-300" where it underflowed to 0 (a sign
+    test over a thousand pairs or more, all one way); ``relation`` prefixes "= " otherwise."""
+    if p is None:
+        return "n/a"
+    if p == 0:
+        return "< 1e-300"
+    return f"= {p:.2g}" if relation else f"{p:.2g}"
+
 
 # The paper's statements that the analysis can check (Results, Figure 3).
 PAPER: dict[str, Any] = {
@@ -217,7 +228,7 @@ def render_report(metrics: dict[str, Any], figures: Sequence[str]) -> str:
         if st is None or "geometries" not in st:
             return "n/a"
         gp = st["sign_test_p_geometries"]
-        return f"{st['geometries_stiff_greater']}/{st['geometries']}, p = {_f(gp, '.2g')}"
+        return f"{st['geometries_stiff_greater']}/{st['geometries']}, p {p_text(gp, relation=True)}"
 
     svs = metrics["stiff_vs_soft"]
     for shape, (k, n) in PAPER["stiff_soft"].items():
@@ -227,7 +238,7 @@ def render_report(metrics: dict[str, Any], figures: Sequence[str]) -> str:
             if st is None
             else f"{100 * st['fraction_stiff_greater']:.1f}% ({st['stiff_greater']:,}/{st['pairs']:,})"
         )
-        p = "n/a" if st is None or st["sign_test_p"] is None else f"{st['sign_test_p']:.2g}"
+        p = p_text(None if st is None else st["sign_test_p"])
         label = "cylindrical (paper: curved)" if shape == "cylindrical" else shape
         lines.append(
             f"| {label} | {100 * k / n:.1f}% ({k:,}/{n:,}), p < 0.001 | {ours} | {p} "
@@ -235,7 +246,7 @@ def render_report(metrics: dict[str, Any], figures: Sequence[str]) -> str:
         )
     for shape in sorted(set(svs) - set(PAPER["stiff_soft"])):  # the excision: not in the paper
         st = svs[shape]
-        p = "n/a" if st["sign_test_p"] is None else f"{st['sign_test_p']:.2g}"
+        p = p_text(st["sign_test_p"])
         lines.append(
             f"| {shape} | not in the paper | {100 * st['fraction_stiff_greater']:.1f}% "
             f"({st['stiff_greater']:,}/{st['pairs']:,}) | {p} | {by_geometry(st)} |"

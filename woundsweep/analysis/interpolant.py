@@ -39,7 +39,15 @@ from ..core.errors import AnalysisError
 from ..core.versions import GP_SURROGATE_FORMAT
 from .settings import SHAPE_CODES
 
-__all__ = ["ANGLE_INPUTS", "HYPER_POINTS", "KERNEL", "GPSurrogate", "InputScale", "fit_gp"]
+__all__ = [
+    "ANGLE_INPUTS",
+    "HYPER_POINTS",
+    "KERNEL",
+    "GPSurrogate",
+    "InputScale",
+    "cos_2t",
+    "fit_gp",
+]
 
 # Columns that are no GP input: the group's keys, and t_d (scale invariance).
 NOT_INPUTS = ("wound_shape", "skin_type", "stage", "dermal_thickness_mm")
@@ -72,12 +80,13 @@ class InputScale(NamedTuple):
     def apply(self, raw: np.ndarray) -> np.ndarray:
         """Raw column values (rows x ``names``) -> scaled inputs."""
         angle = np.array([n in ANGLE_INPUTS for n in self.names])
-        v = np.where(angle, _cos2(raw), raw)
+        v = np.where(angle, cos_2t(raw), raw)
         v = np.where(np.asarray(self.log), np.log(np.where(self.log, v, 1.0)), v)
         return (v - np.asarray(self.low)) / (np.asarray(self.high) - np.asarray(self.low))
 
 
-def _cos2(deg: np.ndarray) -> np.ndarray:
+def cos_2t(deg: Any) -> np.ndarray:
+    """cos 2t of angles t in degrees: the coordinate every result is a function of."""
     return np.cos(np.radians(2.0 * np.asarray(deg, dtype=np.float64)))
 
 
@@ -138,7 +147,7 @@ def shape_inputs(X: np.ndarray, features: Sequence[str], code: float) -> InputSc
     sub = X[X[:, list(features).index("wound_shape")] == code]
     cols: list[tuple[str, bool, float, float]] = []
     for j, name in enumerate(features):
-        v = _cos2(sub[:, j]) if name in ANGLE_INPUTS else sub[:, j]
+        v = cos_2t(sub[:, j]) if name in ANGLE_INPUTS else sub[:, j]
         if name in NOT_INPUTS or not np.isfinite(v).all() or np.ptp(v) == 0:
             continue
         is_log = name in LOG_INPUTS and bool((v > 0).all())
@@ -255,7 +264,7 @@ class GPSurrogate:
                 s: [
                     f"log {n}" if lg else f"cos 2 {n}" if n in ANGLE_INPUTS else n
                     for n, lg in zip(sc.names, sc.log)
-                ]  # fmt: skip
+                ]
                 for s, sc in self.scales.items()
             },  # fmt: skip
             "noise_floor_log_sd": math.sqrt(ss / dof) if dof else None,

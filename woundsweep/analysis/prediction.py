@@ -26,6 +26,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from ..core.errors import AnalysisError
+from .interpolant import cos_2t
 from .model_io import LoadedModel
 from .settings import FEATURES, SHAPE_CODES, SHAPE_FACTORS
 from .training import booster_features, predict_proba
@@ -227,7 +228,7 @@ def angle_weights(meta: dict[str, Any], shape: str, value: float) -> list[tuple[
     k = int(np.searchsorted(g, value))
     a, b = g[k - 1], g[k]
     if np.floor(a / 90.0) == np.ceil(b / 90.0) - 1:  # cos 2t is monotone on [a, b]
-        c = np.cos(np.radians(2.0 * np.array([a, value, b])))
+        c = cos_2t([a, value, b])
         t = (c[1] - c[0]) / (c[2] - c[0])
     else:
         t = (value - a) / (b - a)

@@ -52,7 +52,7 @@ demo: setup
 	@echo "demo: atlas index: $(abspath $(DEMO_DIR))/atlas/index.html (open it in a browser)"
 
 # The paper grid charted in parts (docs/atlas.md): continues from the kept table
-# charted/paper.parquet, runs the shards it lacks for CHART_HOURS, packs after each shard.
+# charted/paper.parquet, runs the shards it lacks for CHART_HOURS, packs every 15 minutes and when stopped.
 CHART_SWEEP ?= sweeps/paper.yaml
 CHART_TABLE ?= charted/paper.parquet
 CHART_RUN ?= runs/chart-paper

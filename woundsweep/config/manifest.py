@@ -1,7 +1,8 @@
 """The manifest (a sweep expanded into one row per job) and the run directory that holds it.
 
-`expand` turns a `Sweep` into the manifest's rows in a stable geometry-major order; job and
-geometry ids are content hashes of the parameters. `load_run` opens a run directory made by
+`expand` turns a `Sweep` into the manifest's rows in a stable geometry-major order (the
+grid's product, or the random draws of its ``sample`` design); job and geometry ids are
+content hashes of the parameters. `load_run` opens a run directory made by
 ``woundsweep generate``; `Run.job` and `Run.geometry` give one job's manifest row and mesh
 parameters (`job_geometry`; their `GeometrySpec.mesh_id` names the job's mesh files).
 """
@@ -22,6 +23,7 @@ import pandas as pd
 
 from ..core.errors import GeometryError, StoreError, SweepError
 from ..core.layout import RunLayout
+from .design import draw_sample, sampled_jobs
 from .geometry import GeometrySpec
 from .rules import compile_rule, evaluate_rule
 from .sweep import (
@@ -162,8 +164,20 @@ def _derive(df: pd.DataFrame) -> pd.DataFrame:
     return df
 
 
+def _frame(df: pd.DataFrame) -> pd.DataFrame:
+    """Job parameters completed into the manifest's parameter and derived columns (a shape's
+    own factors NaN for the other shapes)."""
+    for axis in sorted({a for own in SHAPE_AXES.values() for a in own}):
+        if axis not in df:
+            df[axis] = np.nan
+    return _derive(df)
+
+
 def count_jobs(sweep: Sweep) -> int:
-    """The jobs of the grid before exclusions (computed without expanding it)."""
+    """The jobs of the grid before exclusions (computed without expanding it); of a sampled
+    sweep, shapes x geometries x skin types."""
+    if sweep.sample is not None:
+        return sampled_jobs(sweep)
     common = math.prod(len(sweep.grid[k]) for k in GRID_AXES)
     return sum(
         common * math.prod(len(sweep.shapes[s][a]) for a in SHAPE_AXES[s]) for s in sweep.shapes
@@ -191,40 +205,49 @@ def _check_geometries(sweep: Sweep, df: pd.DataFrame) -> None:
 
 
 def expand(sweep: Sweep, max_jobs: int = MAX_JOBS) -> pd.DataFrame:
-    """Expand a sweep into the manifest (one row per job, geometry-major stable order).
+    """Expand a sweep into the manifest (one row per job, geometry-major stable order): the
+    grid's product less the excluded jobs, or a sampled sweep's draws (`design.draw_sample`).
 
     A grid of more than ``max_jobs`` jobs (before exclusions) is refused before expansion.
     """
     total = count_jobs(sweep)
     if total > max_jobs:
+        key = "grid" if sweep.sample is None else "sample"
+        when = " before exclusions" if sweep.sample is None else ""
         raise SweepError(
             sweep.path,
-            "grid",
-            f"the grid has {total} jobs before exclusions, above the limit of {max_jobs} "
+            key,
+            f"the {key} has {total} jobs{when}, above the limit of {max_jobs} "
             "(generate --max-jobs raises it)",
         )
-    rows = []
-    for shape in sorted(sweep.shapes):
-        own = SHAPE_AXES[shape]
-        axes = [sweep.grid[k] for k in GRID_AXES[:5]] + [sweep.shapes[shape][a] for a in own]
-        axes += [sweep.grid["skin_type"], sweep.grid["orientation_deg"]]
-        names = [*GRID_AXES[:5], *own, "skin_type", "orientation_deg"]
-        for values in itertools.product(*axes):
-            row = dict(zip(names, values))
-            row["wound_shape"] = shape
-            rows.append(row)
-    df = pd.DataFrame(rows)
-    for axis in sorted({a for own in SHAPE_AXES.values() for a in own}):
-        if axis not in df:
-            df[axis] = np.nan
-    df = _derive(df)
-    keep = np.ones(len(df), dtype=bool)
-    for i, rule in enumerate(sweep.exclude):
-        tree = compile_rule(sweep.path, f"exclude[{i}]", rule, RULE_NAMES)
-        with np.errstate(all="ignore"):  # x / 0 is inf, as in NumPy; no warning on stderr
-            hit = evaluate_rule(tree, df)
-        keep &= ~np.broadcast_to(np.asarray(hit, dtype=bool), keep.shape)
-    df = df[keep].reset_index(drop=True)
+    trees = [
+        compile_rule(sweep.path, f"exclude[{i}]", rule, RULE_NAMES)
+        for i, rule in enumerate(sweep.exclude)
+    ]
+
+    def excluded(df: pd.DataFrame) -> np.ndarray:
+        hit = np.zeros(len(df), dtype=bool)
+        for tree in trees:
+            with np.errstate(all="ignore"):  # x / 0 is inf, as in NumPy; no warning on stderr
+                out = evaluate_rule(tree, df)
+            hit |= np.broadcast_to(np.asarray(out, dtype=bool), hit.shape)
+        return hit
+
+    if sweep.sample is not None:
+        df = draw_sample(sweep, _frame, excluded)
+    else:
+        rows = []
+        for shape in sorted(sweep.shapes):
+            own = SHAPE_AXES[shape]
+            axes = [sweep.grid[k] for k in GRID_AXES[:5]] + [sweep.shapes[shape][a] for a in own]
+            axes += [sweep.grid["skin_type"], sweep.grid["orientation_deg"]]
+            names = [*GRID_AXES[:5], *own, "skin_type", "orientation_deg"]
+            for values in itertools.product(*axes):
+                row = dict(zip(names, values))
+                row["wound_shape"] = shape
+                rows.append(row)
+        df = _frame(pd.DataFrame(rows))
+        df = df[~excluded(df)].reset_index(drop=True)
     if df.empty:
         raise SweepError(sweep.path, "exclude", "the grid expands to zero jobs")
     _check_geometries(sweep, df)

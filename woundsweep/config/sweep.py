@@ -1,10 +1,11 @@
 """Sweep files: their schema, loading and validation into a typed `Sweep`.
 
 A sweep YAML has the sections ``grid`` (axes shared by the wound shapes), ``shapes``
-(the shape-specific axes of each wound shape), ``exclude`` (rules, as expressions over the
-manifest's columns, that drop combinations), and the settings ``materials``, ``stages``,
-``solver`` and ``analysis`` (typed records whose defaults are the paper's values:
-`Materials`, `StageSettings`, `SolverSettings`, `ModelSettings`).
+(the shape-specific axes of each wound shape), ``sample`` (optional: a random design between
+the axes' bounds instead of their product, `design.SampleDesign`), ``exclude`` (rules, as
+expressions over the manifest's columns, that drop combinations), and the settings
+``materials``, ``stages``, ``solver`` and ``analysis`` (typed records whose defaults are the
+paper's values: `Materials`, `StageSettings`, `SolverSettings`, `ModelSettings`).
 
 Lengths are in mm, moduli in kPa, penalties in GPa (converted where used).
 """
@@ -23,6 +24,7 @@ from ..core.errors import SweepError
 from ..core.fsutil import read_small_text
 from . import strictyaml
 from .analysis import ModelSettings
+from .design import SampleDesign, check_sampled_axes, parse_sample
 from .limits import check_settings
 from .paper import CLOSURE_LOADS, Materials, StageSettings
 from .rules import compile_rule
@@ -114,11 +116,12 @@ DEFAULTS: dict[str, Any] = {
     "analysis": dataclasses.asdict(ModelSettings()),
 }
 SETTINGS = tuple(DEFAULTS)
-TOP_KEYS = ("name", "description", "grid", "shapes", "exclude", *SETTINGS)
+TOP_KEYS = ("name", "description", "grid", "shapes", "sample", "exclude", *SETTINGS)
 
 
 class Sweep(NamedTuple):
-    """A validated sweep: grid axes and settings with defaults filled in."""
+    """A validated sweep: grid axes and settings with defaults filled in; ``sample`` the
+    random design (None: the grid's product)."""
 
     path: str
     name: str
@@ -129,6 +132,7 @@ class Sweep(NamedTuple):
     stages: StageSettings
     solver: SolverSettings
     analysis: ModelSettings
+    sample: SampleDesign | None = None
 
     def settings_dict(self) -> dict[str, Any]:
         """The settings sections in plain form (as a sweep file writes them)."""
@@ -143,6 +147,9 @@ class Sweep(NamedTuple):
         """Everything that determines the jobs and their results (not the file's formatting)."""
         d = self._asdict()
         d.pop("path")
+        sample = d.pop("sample")
+        if sample is not None:  # a grid sweep's record has no sample key
+            d["sample"] = sample.to_dict()
         return {**d, **self.settings_dict()}
 
 
@@ -245,6 +252,7 @@ def parse_sweep(data: Any, path: str = "<sweep>") -> Sweep:
     for key in ("grid", "shapes"):
         if key not in data:
             raise SweepError(path, key, "missing section")
+    sample = parse_sample(path, data.get("sample"), MAX_JOBS)
     grid_in = data["grid"]
     if not isinstance(grid_in, dict):
         raise SweepError(path, "grid", "expected a mapping of axis name -> list of values")
@@ -274,6 +282,8 @@ def parse_sweep(data: Any, path: str = "<sweep>") -> Sweep:
             raise SweepError(path, f"shapes.{shape}", f"expected exactly the key(s) {keys}")
         kind = "nonnegative" if shape == "cylindrical" else "positive"
         shapes[shape] = {a: _axis(path, f"shapes.{shape}.{a}", spec[a], kind=kind) for a in axes}
+    if sample is not None:
+        check_sampled_axes(path, grid, shapes, sample)
     if max(grid["mesh_size_factor"]) > 1:
         raise SweepError(
             path,
@@ -352,6 +362,7 @@ def parse_sweep(data: Any, path: str = "<sweep>") -> Sweep:
         stages=StageSettings.from_dict(settings["stages"]),
         solver=SolverSettings.from_dict(settings["solver"]),
         analysis=analysis,
+        sample=sample,
     )
 
 

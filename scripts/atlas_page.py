@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from woundsweep.analysis.closures import closure_rows, closure_summary
+from woundsweep.analysis.offgrid import offset_text
 from woundsweep.analysis.report import p_text
 from woundsweep.config.manifest import load_run
 from woundsweep.execution.summary import busy_seconds
@@ -139,13 +140,19 @@ def _coverage(cov: dict[str, Any]) -> str:
     return f"{one('0.8')} / {one('0.95')}"
 
 
+def _errors(r: dict[str, Any]) -> str:
+    """A median relative error and a mean offset (`offgrid.offset_text`) as ``2.0 %, -1.9 %``."""
+    off = offset_text(r).replace("%", " %")
+    return f"{100 * r['median_relative_error']:.1f} %, mean offset {off}"
+
+
 def _cross(m: dict[str, Any]) -> list[str]:
     """The rows of the cross-calibration by run: each fold, then the folds pooled."""
     x = m["off_grid_cross_calibration"]
     lines = [
         f"| surrogate off the grid: coverage at 80 % / 95 %, {f['test_run']} (calibrated on"
         f" {', '.join(f['calibrated_on'])}) | none | {_coverage(f['coverage'])},"
-        f" {f['geometries']} geometries; median error {100 * f['median_relative_error']:.1f} % |"
+        f" {f['geometries']} geometries; median error {_errors(f)} |"
         for f in x["folds"]
     ]
     p = x["pooled"]
@@ -154,7 +161,7 @@ def _cross(m: dict[str, Any]) -> list[str]:
         "| surrogate off the grid: coverage at 80 % / 95 %, folds pooled (the model's"
         f" intervals: calibrated on {runs} pooled) | none |"
         f" {_coverage(p['coverage'])}, {p['geometries']} geometries |",
-        f"| surrogate off the grid: median error | none | {100 * p['median_relative_error']:.1f} % |",
+        f"| surrogate off the grid, calibration runs: median error, mean offset | none | {_errors(p)} |",
     ]
     return lines
 
@@ -166,9 +173,10 @@ def _off_grid(m: dict[str, Any]) -> list[str]:
         return lines or ["| surrogate off the grid (`--test-on`) | none | not measured |"]
     q = t["quantile_classes"]
     return lines + [
-        f"| surrogate off the grid: coverage at 80 % / 95 % | none | {_coverage(t['coverage'])},"
-        f" {t['rows']:,} rows of {t['geometries']} geometries never fitted or calibrated on |",
-        f"| surrogate off the grid: median error | none | {100 * t['median_relative_error']:.1f} % |",
+        f"| surrogate off the grid: coverage at 80 % / 95 %, {t['run']} | none |"
+        f" {_coverage(t['coverage'])}, {t['rows']:,} rows of {t['geometries']} geometries never"
+        " fitted or calibrated on |",
+        f"| surrogate off the grid, {t['run']}: median error, mean offset | none | {_errors(t)} |",
         "| surrogate off the grid: quantile class exact / within one (geometry split's edges) |"
         f" none | {q['geometry']['surrogate_accuracy']:.2f} / {q['geometry']['surrogate_within_one']:.2f}"
         f" (classifier {q['geometry']['classifier_accuracy']:.2f} /"

@@ -8,6 +8,7 @@ from __future__ import annotations
 import contextlib
 import importlib.util
 import io
+import math
 import re
 from pathlib import Path
 from types import ModuleType
@@ -114,7 +115,8 @@ def test_off_grid_rows_carry_the_coverage_interval_and_each_fold() -> None:
     )
     # Metrics written before the interval existed still render.
     assert mod._coverage({"0.8": _cov(0.5, 10, None)}) == "0.500 (5/10) / n/a"
-    fold = {"rows": 800, "geometries": 24, "median_relative_error": 0.035, "coverage": cov}
+    fold = {"rows": 800, "geometries": 24, "median_relative_error": 0.035, "coverage": cov,
+            "mean_log_error": math.log(0.981)}  # fmt: skip
     m = {
         "surrogate": {"calibration": "... on the rows of A and B pooled (off the grid)"},
         "off_grid_cross_calibration": {
@@ -130,5 +132,9 @@ def test_off_grid_rows_carry_the_coverage_interval_and_each_fold() -> None:
     assert len(rows) == 4 and all(r.startswith("| surrogate off the grid") for r in rows)
     assert "A (calibrated on B)" in rows[0] and "B (calibrated on A)" in rows[1]
     assert "calibrated on both runs pooled" in rows[2] and "48 geometries" in rows[2]
-    assert "90 % 0.700-0.810" in rows[2] and rows[3].endswith("| 3.5 % |")
+    assert "90 % 0.700-0.810" in rows[2]
+    assert rows[3].endswith("| 3.5 %, mean offset -1.9 % |")
+    # Metrics without the offset still render.
+    del m["off_grid_cross_calibration"]["pooled"]["mean_log_error"]
+    assert mod._off_grid(m)[3].endswith("| 3.5 %, mean offset n/a |")
     assert mod.analyze_command(m).endswith("--calibrate-on CAL --calibrate-on TEST")

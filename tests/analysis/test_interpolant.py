@@ -19,7 +19,7 @@ from synthetic_store import SMALL_SWEEP, SMOOTH_NOISE, smooth_stress, write_stor
 from woundsweep.analysis import encode_features
 from woundsweep.analysis.data import load_results, select_rows
 from woundsweep.analysis.interpolant import GPSurrogate
-from woundsweep.analysis.offgrid import OtherRows, off_grid_test
+from woundsweep.analysis.offgrid import OtherRows, off_grid_test, report_lines
 from woundsweep.analysis.regression import fit_surrogate
 from woundsweep.config.analysis import resolve_settings
 from woundsweep.config.manifest import expand
@@ -145,6 +145,20 @@ def test_gp_ignores_the_dermal_thickness_and_averages_its_replicates(fits) -> No
     assert summary["fitted_noise_log_sd"]["median"] == pytest.approx(
         SMOOTH_NOISE / math.sqrt(2), rel=0.3
     )
+
+
+def test_mean_offset_measures_a_shift_of_the_stresses(off_grid, fits) -> None:
+    """The GP is unbiased on the smooth truth between the grid's values; a run whose every
+    stress is 5 % higher reads an offset 5 % lower, to rounding."""
+    test = off_grid[1]
+    base = _test(fits["gp"], test)
+    assert abs(base["mean_log_error"]) < 0.01, base["mean_log_error"]
+    rows = test.rows.copy()
+    rows["p99_von_mises_kPa"] *= 1.05
+    moved = _test(fits["gp"], OtherRows(test.source, rows, test.X))
+    assert moved["mean_log_error"] == pytest.approx(base["mean_log_error"] - math.log(1.05))
+    line = report_lines({"off_grid_test": moved, "surrogate": {"surrogate": "gp"}})[3]
+    assert f"mean offset is {100 * math.expm1(moved['mean_log_error']):+.1f}%" in line
 
 
 def test_gp_interpolates_the_orientation_in_cos_2t(fits) -> None:

@@ -25,6 +25,7 @@ from woundsweep.analysis.closures import closure_rows, closure_summary
 from woundsweep.analysis.offgrid import offset_text
 from woundsweep.analysis.report import p_text
 from woundsweep.config.manifest import load_run
+from woundsweep.core.errors import StoreError, SweepError
 from woundsweep.execution.summary import busy_seconds
 from woundsweep.store.packed import read_packed
 
@@ -244,28 +245,44 @@ def table(c: dict[str, Any], m: dict[str, Any], ends: dict[str, dict[str, str]],
     return "\n".join(lines)
 
 
+def _other_runs(m: dict[str, Any]) -> list[tuple[str, str]]:
+    """(placeholder, run directory) of each ``--calibrate-on`` and ``--test-on`` run."""
+    x = m.get("off_grid_cross_calibration")
+    cal = x["runs"] if x else []
+    if not cal and "off the grid" in m.get("surrogate", {}).get("calibration", ""):
+        cal = ["CAL"]
+    t = m.get("off_grid_test") or {}
+    test = [r["run"] for r in t.get("by_run", [])] or ([t["run"]] if t.get("run") else [])
+    return [(f"CAL{i + 1}", r) for i, r in enumerate(cal)] + [
+        (f"TEST{i + 1}", r) for i, r in enumerate(test)
+    ]
+
+
 def analyze_command(m: dict[str, Any]) -> str:
     """The `woundsweep analyze` call that wrote ``metrics.json`` (its non-default parts)."""
     parts = ["woundsweep analyze RUN"]
     if m.get("settings", {}).get("surrogate", "trees") != "trees":
         parts.append(f"--param surrogate={m['settings']['surrogate']}")
-    if m.get("off_grid_cross_calibration"):
-        parts.append("--calibrate-on CAL --calibrate-on TEST")
-    elif "off the grid" in m.get("surrogate", {}).get("calibration", ""):
-        parts.append("--calibrate-on CAL")
-    if m.get("off_grid_test"):
-        parts.append("--test-on TEST")
+    for name, _ in _other_runs(m):
+        parts.append(f"--{'calibrate' if name.startswith('CAL') else 'test'}-on {name}")
     return " ".join(parts)
 
 
+def _sweep_name(run: str) -> str:
+    try:
+        return load_run(run).sweep.name
+    except (OSError, StoreError, SweepError):  # a run not on this machine: its folder's name
+        return Path(run).name
+
+
 def off_grid_runs(m: dict[str, Any]) -> str:
-    if not (m.get("off_grid_test") or m.get("off_grid_cross_calibration")):
+    """What each placeholder of `analyze_command` stands for: a run of a sweep with its kept
+    table unpacked into it."""
+    named = [(k, _sweep_name(r)) for k, r in _other_runs(m) if r != "CAL"]
+    if not named:
         return ""
-    return (
-        " CAL and TEST are runs of `sweeps/paper-between-calibration.yaml` and"
-        " `sweeps/paper-between-test.yaml` with `charted/paper-between-calibration.parquet` and"
-        " `charted/paper-between-test.parquet` unpacked into them."
-    )
+    each = "; ".join(f"{k}: `sweeps/{n}.yaml`, `charted/{n}.parquet`" for k, n in named)
+    return f" The other runs are runs of a sweep with its kept table unpacked into them ({each})."
 
 
 def page(run: Path, table_path: Path, beside: list[Path]) -> tuple[str, dict[str, Any]]:

@@ -137,4 +137,8 @@ def test_off_grid_rows_carry_the_coverage_interval_and_each_fold() -> None:
     # Metrics without the offset still render.
     del m["off_grid_cross_calibration"]["pooled"]["mean_log_error"]
     assert mod._off_grid(m)[3].endswith("| 3.5 %, mean offset n/a |")
-    assert mod.analyze_command(m).endswith("--calibrate-on CAL --calibrate-on TEST")
+    assert mod.analyze_command(m).endswith("--calibrate-on CAL1 --calibrate-on CAL2")
+    m["off_grid_test"] = {"run": "T and U pooled", "by_run": [{"run": "T"}, {"run": "runs/U"}]}
+    assert mod.analyze_command(m).endswith("--calibrate-on CAL2 --test-on TEST1 --test-on TEST2")
+    # Runs not on this machine are named by their folders.
+    assert mod.off_grid_runs(m).endswith("TEST2: `sweeps/U.yaml`, `charted/U.parquet`).")

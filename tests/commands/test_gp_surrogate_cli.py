@@ -50,25 +50,27 @@ def _between(td: float, widths: list[float], aspect: list[float], depth: list[fl
     return {**SWEEP, "name": "between", "grid": grid, "shapes": shapes}
 
 
-# 48 jobs (288 rows) and 24 (144 rows) to calibrate on, 24 (144 rows) to test on.
+# 48 jobs (288 rows) and 24 (144 rows) to calibrate on, 24 + 24 (144 + 144 rows) to test on.
 CAL = _between(1.5, [0.37, 0.45], [0.03, 0.13], [0.37, 0.57], [15, 60])
 CAL2 = _between(1.75, [0.41], [0.05, 0.15], [0.41, 0.61], [20, 70])
 TEST = _between(1.25, [0.43], [0.07, 0.17], [0.43, 0.63], [30, 75])
+TEST2 = _between(1.1, [0.39], [0.09, 0.19], [0.47, 0.67], [40, 80])
 
 
 @pytest.fixture(scope="module")
 def runs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
-    """The analysed run (GP surrogate, calibrated on two off-grid runs pooled and tested on a
-    third), the three others, and what analyze printed (``stdout``)."""
+    """The analysed run (GP surrogate, calibrated on two off-grid runs pooled and tested on two
+    others pooled), the four others, and what analyze printed (``stdout``)."""
     base = tmp_path_factory.mktemp("gp")
-    rd = {k: base / k for k in ("run", "cal", "cal2", "test")}
+    rd = {k: base / k for k in ("run", "cal", "cal2", "test", "test2")}
     write_store(rd["run"], smooth_stress, sweep=SWEEP, seed=3, failed_fraction=0.0)
     write_store(rd["cal"], smooth_stress, sweep=CAL, seed=4, failed_fraction=0.0)
     write_store(rd["cal2"], smooth_stress, sweep=CAL2, seed=6, failed_fraction=0.0)
     write_store(rd["test"], smooth_stress, sweep=TEST, seed=5, failed_fraction=0.0)
+    write_store(rd["test2"], smooth_stress, sweep=TEST2, seed=7, failed_fraction=0.0)
     args = ["analyze", str(rd["run"]), "--split", "geometry", *FAST, *GP,
             "--calibrate-on", str(rd["cal"]), "--calibrate-on", str(rd["cal2"]),
-            "--test-on", str(rd["test"])]  # fmt: skip
+            "--test-on", str(rd["test"]), "--test-on", str(rd["test2"])]  # fmt: skip
     out = io.StringIO()
     with contextlib.redirect_stdout(out):
         assert main(args) == 0
@@ -89,18 +91,27 @@ def test_metrics_and_report_state_the_gp_and_the_off_grid_runs(runs: dict[str, P
     # The GP cannot see t_d: its Sobol total index is zero exactly, not merely small.
     assert s["sensitivity"]["indices"]["dermal_thickness_mm"]["ST"] == pytest.approx(0, abs=1e-12)
     off = m["off_grid_test"]
-    assert off["run"] == str(runs["test"]) and off["rows"] == 144
+    assert off["run"] == f"{runs['test']} and {runs['test2']} pooled" and off["rows"] == 288
+    alone = off["by_run"]
+    assert [(r["run"], r["rows"]) for r in alone] == [
+        (str(runs["test"]), 144),
+        (str(runs["test2"]), 144),
+    ]
     for level in ("0.8", "0.95"):
         c = off["coverage"][level]
-        assert c["rows"] == 144 and 0 <= c["empirical"] <= 1
-        # Its bootstrap interval over the test run's 4 geometries (widths x offsets).
-        assert c["geometries"] == 4 and c["interval"][0] <= c["empirical"] <= c["interval"][1]
+        assert c["rows"] == 288 and 0 <= c["empirical"] <= 1
+        # Its bootstrap interval over the test runs' 4 + 4 geometries (widths x offsets).
+        assert c["geometries"] == 8 and c["interval"][0] <= c["empirical"] <= c["interval"][1]
+        assert c["covered"] == sum(r["coverage"][level]["covered"] for r in alone)
     assert 0 < off["median_relative_error"] < 0.2
+    # Equal sizes: the pooled mean offset is the runs' mean.
+    assert off["mean_log_error"] == pytest.approx(np.mean([r["mean_log_error"] for r in alone]))
     q = off["quantile_classes"]["geometry"]
     assert set(q) >= {"surrogate_accuracy", "classifier_accuracy"}
     assert all(0 <= q[k] <= 1 for k in q if k != "edges_from")
     report = (a / "report.md").read_text()
-    assert f"## Off the grid: {runs['test']} (`--test-on`)" in report
+    assert f"## Off the grid: {runs['test']} and {runs['test2']} pooled (`--test-on`)" in report
+    assert f"| {runs['test2']} | 144 (4) |" in report.split("Each run alone:")[1]
     assert "Gaussian processes of log p99" in report and "Top three by Sobol total index" in report
     meta = json.loads((a / "surrogate_meta.json").read_text())
     assert meta["surrogate"] == "gp" and meta["calibration"] == s["calibration"]
@@ -304,4 +315,5 @@ def test_two_calibration_runs_pool_and_cross_calibrate(runs: dict[str, Path]) ->
     assert "## Off the grid: cross-calibration by run" in (a / "report.md").read_text()
     out = runs["stdout"].read_text()
     assert "cross-calibration off the grid (all folds pooled; 432 rows)" in out
-    assert f"off the grid ({runs['test']}, 144 rows): coverage" in out
+    assert f"off the grid ({runs['test']} and {runs['test2']} pooled, 288 rows): coverage" in out
+    assert f"  {runs['test2']} (144 rows): coverage" in out

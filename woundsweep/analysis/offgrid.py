@@ -2,7 +2,7 @@
 
 ``analyze RUN --calibrate-on RUN2`` takes the surrogate's conformal scores from RUN2's rows
 (`regression.fit_surrogate`); ``--test-on RUN3`` reports on RUN3's rows, used for nothing
-else (`off_grid_test`): the intervals' coverage at `COVERAGE_LEVELS` with its bootstrap
+else (`off_grid_test`; given twice or more, on the runs pooled and on each alone): the intervals' coverage at `COVERAGE_LEVELS` with its bootstrap
 interval over RUN3's geometries (`conformal.coverage_interval`), the estimate's median
 relative error and mean log error (its offset: positive where it over-predicts), and the
 quantile-class accuracy of the surrogate's estimate and of each
@@ -383,4 +383,20 @@ def report_lines(metrics: dict[str, Any]) -> list[str]:
             f"| {scheme} split | {q['surrogate_accuracy']:.2f} / {q['surrogate_within_one']:.2f} "
             f"| {q['classifier_accuracy']:.2f} / {q['classifier_within_one']:.2f} |"
         )
+    if t.get("by_run"):
+        lines += [
+            "",
+            "Each run alone:",
+            "",
+            "| run | rows (geometries) | median error | mean offset | coverage at 80% "
+            "| coverage at 95% |",
+            "|---|---|---|---|---|---|",
+        ]
+        for r in t["by_run"]:
+            cov = r["coverage"]
+            lines.append(
+                f"| {r['run']} | {r['rows']} ({r['geometries']}) "
+                f"| {100 * r['median_relative_error']:.1f}% | {offset_text(r)} "
+                f"| {coverage_text(cov.get('0.8', {}))} | {coverage_text(cov.get('0.95', {}))} |"
+            )
     return lines

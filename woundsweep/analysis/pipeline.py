@@ -88,23 +88,22 @@ def _surrogate(
     return fit, {**fit.metrics, "sensitivity": sobol}
 
 
-def _calibration_runs(calibrate_on: str | Path | Sequence[str | Path] | None) -> list[Path]:
-    """``--calibrate-on``'s runs: none, one, or several (a path or a sequence of them)."""
-    if calibrate_on is None:
+def _run_paths(given: str | Path | Sequence[str | Path] | None) -> list[Path]:
+    """``--calibrate-on``'s or ``--test-on``'s runs: none, one, or several (a path or a
+    sequence of them)."""
+    if given is None:
         return []
-    if isinstance(calibrate_on, (str, Path)):
-        return [Path(calibrate_on)]
-    return [Path(p) for p in calibrate_on]
+    if isinstance(given, (str, Path)):
+        return [Path(given)]
+    return [Path(p) for p in given]
 
 
-def _other_paths(rd: Path, calibrate_on: Sequence[Path], test_on: str | Path | None) -> None:
+def _other_paths(rd: Path, calibrate_on: Sequence[Path], test_on: Sequence[Path]) -> None:
     """Refuse a ``--calibrate-on`` or ``--test-on`` run that is missing, or the same run as
     the analysed one or another option's (checked before anything is read)."""
     named = [("the analysed run", rd.resolve())]
-    given = [("--calibrate-on", p) for p in calibrate_on] + [("--test-on", test_on)]
+    given = [("--calibrate-on", p) for p in calibrate_on] + [("--test-on", p) for p in test_on]
     for option, path in given:
-        if path is None:
-            continue
         if not Path(path).is_dir():
             raise AnalysisError(f"{option} {path}: no such run directory")
         same = [k for k, v in named if Path(path).resolve() == v]
@@ -133,7 +132,7 @@ def run_analysis(
     stress: str = STRESS,
     beside: Sequence[str | Path] = (),
     calibrate_on: str | Path | Sequence[str | Path] | None = None,
-    test_on: str | Path | None = None,
+    test_on: str | Path | Sequence[str | Path] | None = None,
 ) -> AnalysisOutput:
     """Fit and evaluate each scheme; write metrics, models, figures and report.md.
 
@@ -144,9 +143,9 @@ def run_analysis(
     ``beside`` are runs closed by other closing loads, drawn beside this one's in Figure 2
     (`woundsweep.analysis.closures`). ``calibrate_on``: a run (wounds between the grid's
     values) whose rows calibrate the surrogate's intervals, or several: calibrated on their
-    rows pooled, the coverage estimated by cross-calibration by run; ``test_on``: a run whose
-    rows test the surrogate and the classifiers and nothing else
-    (`woundsweep.analysis.offgrid`).
+    rows pooled, the coverage estimated by cross-calibration by run; ``test_on``: a run (or
+    several, pooled, each also reported alone) whose rows test the surrogate and the
+    classifiers and nothing else (`woundsweep.analysis.offgrid`).
     """
     say = echo or (lambda _line: None)
     import xgboost as xgb
@@ -161,8 +160,9 @@ def run_analysis(
     for s in schemes:
         if s not in SCHEMES:
             raise AnalysisError(f"unknown split scheme {s!r} (expected one of {SCHEMES})")
-    cal_paths = _calibration_runs(calibrate_on)
-    _other_paths(rd, cal_paths, test_on)
+    cal_paths = _run_paths(calibrate_on)
+    test_paths = _run_paths(test_on)
+    _other_paths(rd, cal_paths, test_paths)
     say("reading the results...")
     run = run_or_none(rd)  # the sweep and manifest, read once for every step below
     sweep_analysis, skins = sweep_settings(run)
@@ -206,7 +206,8 @@ def run_analysis(
     # Read and checked before any training.
     cal_runs = [read_other(p, "--calibrate-on", ref) for p in cal_paths]
     cal_rows = pool(cal_runs) if cal_runs else None
-    test_rows = None if test_on is None else read_other(test_on, "--test-on", ref)
+    test_runs = [read_other(p, "--test-on", ref) for p in test_paths]
+    test_rows = pool(test_runs) if test_runs else None
     fits = []
     for s in schemes:
         say(f"training the {s} split model on {len(rows)} rows ({q} quantiles)...")
@@ -255,13 +256,19 @@ def run_analysis(
         metrics["closures"] = closures
     if len(cal_runs) > 1 and surrogate is not None:
         metrics["off_grid_cross_calibration"] = cross_calibration(surrogate.model, cal_runs)
-    if test_rows is not None:
-        metrics["off_grid_test"] = (
-            off_grid_test(surrogate.model, surrogate.meta["calibration_scores_log"], test_rows,
-                          fits, settings.nthread)
-            if surrogate is not None
-            else {"run": test_rows.source, "statement": surrogate_metrics["statement"]}
-        )  # fmt: skip
+    if test_rows is not None and surrogate is None:
+        metrics["off_grid_test"] = {
+            "run": test_rows.source,
+            "statement": surrogate_metrics["statement"],
+        }
+    elif test_rows is not None:
+        scores = surrogate.meta["calibration_scores_log"]
+        test = off_grid_test(surrogate.model, scores, test_rows, fits, settings.nthread)
+        if len(test_runs) > 1:
+            test["by_run"] = [
+                off_grid_test(surrogate.model, scores, r, fits, settings.nthread) for r in test_runs
+            ]
+        metrics["off_grid_test"] = test
     metrics["mesh_sensitivity"] = mesh_sensitivity(rows, metrics)
     final = Path(out_dir) if out_dir is not None else RunLayout(rd).analysis_dir
     out = _staging_dir(final)

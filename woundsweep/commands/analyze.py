@@ -35,6 +35,7 @@ def _cov(level: str, c: dict[str, Any]) -> str:
 
 
 def summary_lines(metrics: dict[str, Any]) -> list[str]:
+    from ..analysis.offgrid import offset_text
     from ..analysis.report import auc_text
 
     """A few lines for the terminal: rows, per-scheme scores, stiff vs soft."""
@@ -68,8 +69,14 @@ def summary_lines(metrics: dict[str, Any]) -> list[str]:
         cov = ", ".join(_cov(lv, c) for lv, c in off["coverage"].items())
         lines.append(
             f"off the grid ({off['run']}, {off['rows']} rows): coverage {cov}, median "
-            f"error {_pct(off['median_relative_error'])}"
+            f"error {_pct(off['median_relative_error'])}, mean offset {offset_text(off)}"
         )
+        for r in off.get("by_run", []):
+            cov = ", ".join(_cov(lv, c) for lv, c in r["coverage"].items())
+            lines.append(
+                f"  {r['run']} ({r['rows']} rows): coverage {cov}, median error "
+                f"{_pct(r['median_relative_error'])}, mean offset {offset_text(r)}"
+            )
     elif off is not None:
         lines.append(f"off the grid ({off['run']}): {off['statement']}")
     cross = metrics.get("off_grid_cross_calibration")
@@ -144,11 +151,11 @@ def summary_lines(metrics: dict[str, Any]) -> list[str]:
     "calibrated on the others).",
 )  # fmt: skip
 @click.option(
-    "--test-on", "test_on", metavar="RUN_DIR", default=None,
+    "--test-on", "test_on", metavar="RUN_DIR", multiple=True,
     type=click.Path(file_okay=False, path_type=Path),
     help="Report on this run's rows, used for nothing else: the surrogate's coverage at 80% and "
-    "95%, its median error, and the quantile-class accuracy of the surrogate and the "
-    "classifiers.",
+    "95%, its median error and mean offset, and the quantile-class accuracy of the surrogate "
+    "and the classifiers. Repeated: on the runs' rows pooled, and on each alone.",
 )  # fmt: skip
 def cmd(
     run_dir: Path,
@@ -163,7 +170,7 @@ def cmd(
     stress: str,
     beside: tuple[Path, ...],
     calibrate_on: tuple[Path, ...],
-    test_on: Path | None,
+    test_on: tuple[Path, ...],
 ) -> None:
     """Fit the stress-quantile model (XGBoost) and write RUN_DIR/analysis/.
 
@@ -213,7 +220,7 @@ def cmd(
             stress=stress,
             beside=beside,
             calibrate_on=calibrate_on or None,
-            test_on=test_on,
+            test_on=test_on or None,
         )
         bar.update(bar.total - bar.n)
     except BaseException:

@@ -70,7 +70,7 @@ chart: setup
 # doubles the size).
 MODELS_TABLE ?= charted/paper.parquet
 MODELS_SWEEP ?= sweeps/paper.yaml
-MODELS_CAL ?= paper-between-calibration paper-between-test
+MODELS_CAL ?= paper-random-1 paper-random-2
 MODELS_ARGS ?= --param surrogate=gp --split geometry
 models: setup
 	$(PY) scripts/ship_models.py --table $(MODELS_TABLE) --sweep $(MODELS_SWEEP) \

@@ -12,10 +12,10 @@ files and analysed from inside the work directory, so the model files name no te
 path.
 
     python scripts/ship_models.py --table charted/paper.parquet --sweep sweeps/paper.yaml \
-        --calibrate-on-table charted/paper-between-calibration.parquet \
-        --calibrate-sweep sweeps/paper-between-calibration.yaml \
-        --calibrate-on-table charted/paper-between-test.parquet \
-        --calibrate-sweep sweeps/paper-between-test.yaml --param surrogate=gp
+        --calibrate-on-table charted/paper-random-1.parquet \
+        --calibrate-sweep sweeps/paper-random-1.yaml \
+        --calibrate-on-table charted/paper-random-2.parquet \
+        --calibrate-sweep sweeps/paper-random-2.yaml --param surrogate=gp
 """
 
 from __future__ import annotations

@@ -89,7 +89,7 @@ def summary_lines(metrics: dict[str, Any]) -> list[str]:
         )
         lines.append(
             f"cross-calibration off the grid ({what}; {f['rows']} rows): coverage {cov}, "
-            f"median error {_pct(f['median_relative_error'])}"
+            f"median error {_pct(f['median_relative_error'])}, mean offset {offset_text(f)}"
         )
     lines.append(f"failure model: {metrics.get('failure', {}).get('statement', 'n/a')}")
     for shape, st in metrics["stiff_vs_soft"].items():

@@ -297,12 +297,13 @@ def page(run: Path, table_path: Path, beside: list[Path]) -> tuple[str, dict[str
     report = re.sub(r"^## ", "### ", report, flags=re.M)
     text = f"""# The atlas charted
 
-What is charted: {c["jobs"]:,} of the {c["total"]:,} jobs of `sweeps/paper.yaml`
+This page is built from {c["jobs"]:,} of the {c["total"]:,} jobs of `sweeps/paper.yaml`
 ({_pct(c["jobs"], c["total"])}; P2, the `{load}` closure), whole shards of 486 taken in a fixed
 random order, so the charted share is a random sample of the grid's shards. CPU:
 {c["cpu_h"]:.1f} CPU-hours, {c["cpu_per_job"]:.1f} s a job; {c["wall_h"]:.1f} hours of wall time
 while jobs ran, on this project's machine (two cores, shared). The results are kept in
-`{table_path.as_posix()}` ({c["bytes"] / 1e6:.2f} MB); `make chart` continues from it
+`{table_path.as_posix()}` ({c["bytes"] / 1e6:.2f} MB at the time); `make chart` continues from
+it, so the table can hold more jobs than the page, which is written anew from it
 (`charted/README.md`).
 
 Commands: `make chart`; `woundsweep generate sweeps/paper.yaml --out RUN`, `woundsweep unpack

@@ -245,12 +245,13 @@ def table(c: dict[str, Any], m: dict[str, Any], ends: dict[str, dict[str, str]],
     return "\n".join(lines)
 
 
-def _other_runs(m: dict[str, Any]) -> list[tuple[str, str]]:
-    """(placeholder, run directory) of each ``--calibrate-on`` and ``--test-on`` run."""
+def _other_runs(m: dict[str, Any]) -> list[tuple[str, str | None]]:
+    """(placeholder, run directory) of each ``--calibrate-on`` and ``--test-on`` run; None
+    where metrics.json does not name it (one calibration run)."""
     x = m.get("off_grid_cross_calibration")
-    cal = x["runs"] if x else []
+    cal: list[str | None] = list(x["runs"]) if x else []
     if not cal and "off the grid" in m.get("surrogate", {}).get("calibration", ""):
-        cal = ["CAL"]
+        cal = [None]
     t = m.get("off_grid_test") or {}
     test = [r["run"] for r in t.get("by_run", [])] or ([t["run"]] if t.get("run") else [])
     return [(f"CAL{i + 1}", r) for i, r in enumerate(cal)] + [
@@ -278,7 +279,7 @@ def _sweep_name(run: str) -> str:
 def off_grid_runs(m: dict[str, Any]) -> str:
     """What each placeholder of `analyze_command` stands for: a run of a sweep with its kept
     table unpacked into it."""
-    named = [(k, _sweep_name(r)) for k, r in _other_runs(m) if r != "CAL"]
+    named = [(k, _sweep_name(r)) for k, r in _other_runs(m) if r is not None]
     if not named:
         return ""
     each = "; ".join(f"{k}: `sweeps/{n}.yaml`, `charted/{n}.parquet`" for k, n in named)

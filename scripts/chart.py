@@ -61,7 +61,7 @@ def main() -> int:
     random.Random(a.seed).shuffle(order)
     todo = [k for k in order if set(ids.loc[shards[k]]) - done]
     print(f"chart: {a.shards - len(todo)} of {a.shards} shards charted, {len(todo)} to go")
-    packed, unpacked = time.monotonic(), False
+    packed, pending = time.monotonic(), False
     try:
         for n, k in enumerate(todo):
             hours = (time.monotonic() - t0) / 3600
@@ -70,19 +70,19 @@ def main() -> int:
             print(
                 f"chart: shard {k}/{a.shards} ({len(todo) - n} left, {hours:.2f} h in)", flush=True
             )
-            unpacked = True
+            pending = True  # a shard run since the last pack
             _ws("run", str(a.run), "--shard", f"{k}/{a.shards}", "--workers", str(a.workers),
                 "--fields", "none", "--no-progress")  # fmt: skip
             if time.monotonic() - packed >= 60 * a.pack_minutes:
                 _ws("pack", str(a.run), str(a.table))
-                packed, unpacked = time.monotonic(), False
+                packed, pending = time.monotonic(), False
     except (KeyboardInterrupt, subprocess.CalledProcessError) as e:
         print(f"chart: stopped ({type(e).__name__}); packing what is stored", flush=True)
         return_code = 1
     else:
         return_code = 0
     finally:
-        if unpacked:
+        if pending:
             signal.signal(signal.SIGTERM, signal.SIG_IGN)
             signal.signal(signal.SIGINT, signal.SIG_IGN)
             _ws("pack", str(a.run), str(a.table))

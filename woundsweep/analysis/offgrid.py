@@ -2,11 +2,11 @@
 
 ``analyze RUN --calibrate-on RUN2`` takes the surrogate's conformal scores from RUN2's rows
 (`regression.fit_surrogate`); ``--test-on RUN3`` reports on RUN3's rows, used for nothing
-else (`off_grid_test`; given twice or more, on the runs pooled and on each alone): the intervals' coverage at `COVERAGE_LEVELS` with its bootstrap
-interval over RUN3's geometries (`conformal.coverage_interval`), the estimate's median
-relative error and mean log error (its offset: positive where it over-predicts), and the
-quantile-class accuracy of the surrogate's estimate and of each
-classifier against that classifier's training quantile edges. Every run is read as the
+else (`off_grid_test`; given twice or more, on the runs pooled and on each alone): the
+intervals' coverage at `COVERAGE_LEVELS` with its bootstrap interval over RUN3's geometries
+(`conformal.coverage_interval`), the estimate's median relative error and mean log error (its
+offset: positive where it over-predicts), and the quantile-class accuracy of the surrogate's
+estimate and of each classifier against that classifier's training quantile edges. Every run is read as the
 analysed one (`data`, the same row selection) and refused, in one line, when its rows use
 another set of stress columns, another element degree, or a skin type (or its material),
 wound shape or stage the models did not train on.
@@ -314,6 +314,17 @@ def offset_text(m: Mapping[str, Any]) -> str:
     return "n/a" if e is None else f"{100 * math.expm1(e):+.1f}%"
 
 
+def _result_cells(r: Mapping[str, Any]) -> str:
+    """A tested run's table cells: rows (geometries), median error, mean offset, coverage at
+    80 % and at 95 %."""
+    cov = r["coverage"]
+    return (
+        f"{r['rows']} ({r['geometries']}) | {100 * r['median_relative_error']:.1f}% "
+        f"| {offset_text(r)} | {coverage_text(cov.get('0.8', {}))} "
+        f"| {coverage_text(cov.get('0.95', {}))}"
+    )
+
+
 def cross_report_lines(metrics: dict[str, Any]) -> list[str]:
     """The report's section on the cross-calibration by run (none without it)."""
     x = metrics.get("off_grid_cross_calibration")
@@ -337,12 +348,7 @@ def cross_report_lines(metrics: dict[str, Any]) -> list[str]:
         *x["folds"],
         {**x["pooled"], "test_run": "all folds", "calibrated_on": ["the others"]},
     ]:
-        cov = f["coverage"]
-        lines.append(
-            f"| {f['test_run']} | {', '.join(f['calibrated_on'])} | {f['rows']} "
-            f"({f['geometries']}) | {100 * f['median_relative_error']:.1f}% "
-            f"| {offset_text(f)} | {coverage_text(cov.get('0.8', {}))} | {coverage_text(cov.get('0.95', {}))} |"
-        )
+        lines.append(f"| {f['test_run']} | {', '.join(f['calibrated_on'])} | {_result_cells(f)} |")
     return lines
 
 
@@ -393,10 +399,5 @@ def report_lines(metrics: dict[str, Any]) -> list[str]:
             "|---|---|---|---|---|---|",
         ]
         for r in t["by_run"]:
-            cov = r["coverage"]
-            lines.append(
-                f"| {r['run']} | {r['rows']} ({r['geometries']}) "
-                f"| {100 * r['median_relative_error']:.1f}% | {offset_text(r)} "
-                f"| {coverage_text(cov.get('0.8', {}))} | {coverage_text(cov.get('0.95', {}))} |"
-            )
+            lines.append(f"| {r['run']} | {_result_cells(r)} |")
     return lines

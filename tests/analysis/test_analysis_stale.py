@@ -38,7 +38,7 @@ def analyzed(tmp_path_factory: pytest.TempPathFactory) -> Path:
     rd = tmp_path_factory.mktemp("stale") / "run"
     write_store(rd, depth_stress, sweep=CLI_SWEEP, seed=5)
     with contextlib.redirect_stdout(io.StringIO()):
-        assert main(["analyze", str(rd), *QUICK]) == 0
+        assert main(["analyze", str(rd), *QUICK, "--no-figures"]) == 0
     return rd
 
 
@@ -107,7 +107,8 @@ def test_an_interrupted_analyze_leaves_the_old_analysis_whole(
     assert snapshot(rd / "analysis") == before
     monkeypatch.undo()
     with contextlib.redirect_stdout(io.StringIO()):
-        assert main(["analyze", str(rd), *QUICK, "--split", "random", "--seed", "7"]) == 0
+        argv = ["analyze", str(rd), *QUICK, "--split", "random", "--seed", "7", "--no-figures"]
+        assert main(argv) == 0
     metrics = json.loads((rd / "analysis" / "metrics.json").read_text())
     meta = json.loads((rd / "analysis" / "model_random_meta.json").read_text())
     assert metrics["settings"]["seed"] == 7 and meta["trained_on"] == metrics["trained_on"]

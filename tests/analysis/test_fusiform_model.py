@@ -66,7 +66,7 @@ def analyzed(tmp_path_factory: pytest.TempPathFactory) -> Path:
     rd = tmp_path_factory.mktemp("fusiform-model") / "run"
     write_store(rd, angle_stress, sweep=SWEEP, seed=5, failed_fraction=0.0)
     with contextlib.redirect_stdout(io.StringIO()):
-        assert main(["analyze", str(rd), *FAST]) == 0
+        assert main(["analyze", str(rd), *FAST, "--no-figures"]) == 0
     return rd
 
 
@@ -211,7 +211,7 @@ def test_a_trench_model_refuses_an_excision(tmp_path: Path, run_main) -> None:
     sweep["grid"] = {**SWEEP["grid"], "dermal_thickness_mm": [1, 1.5, 2, 3]}
     rd = tmp_path / "run"
     write_store(rd, angle_stress, sweep=sweep, seed=1, failed_fraction=0.0)
-    rc, _, err = run_main("analyze", rd, "--split", "geometry", *FAST)
+    rc, _, err = run_main("analyze", rd, "--split", "geometry", *FAST, "--no-figures")
     assert rc == 0, err
     meta = json.loads((rd / "analysis" / "model_geometry_meta.json").read_text())
     assert meta["features"] == list(FEATURES)

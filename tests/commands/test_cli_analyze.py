@@ -134,13 +134,21 @@ def test_analyze_writes_every_output(analyzed: tuple[Path, str], results: pd.Dat
     )
 
 
-def test_identical_seeds_give_identical_metrics(
+def test_identical_seeds_give_identical_metrics_with_or_without_figures(
     analyzed: tuple[Path, str], store: Path, tmp_path: Path, run_main
 ) -> None:
     rd = tmp_path / "again"
     shutil.copytree(store, rd)
-    rc, out, err = run_main("analyze", rd, *CLI_FAST)
+    rc, out, err = run_main("analyze", rd, *CLI_FAST, "--no-figures")
     assert rc == 0, err
+    a = rd / "analysis"
+    assert not [p.name for p in a.iterdir() if p.suffix in (".png", ".svg")]
+    # The same report but for its list of figures.
+    first_report = (analyzed[0] / "analysis" / "report.md").read_text().split("## Figures")
+    report = (a / "report.md").read_text().split("## Figures")
+    assert report[0] == first_report[0]
+    assert "[roc_random.png](roc_random.png)" in first_report[1]
+    assert report[1].strip() == "None drawn (`analyze --no-figures`)."
     # The time it took: the last line, on stderr; stdout ends with the files written.
     assert out.splitlines()[-1].startswith("wrote ")
     assert re.fullmatch(

@@ -70,7 +70,7 @@ def runs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     write_store(rd["test2"], smooth_stress, sweep=TEST2, seed=7, failed_fraction=0.0)
     args = ["analyze", str(rd["run"]), "--split", "geometry", *FAST, *GP,
             "--calibrate-on", str(rd["cal"]), "--calibrate-on", str(rd["cal2"]),
-            "--test-on", str(rd["test"]), "--test-on", str(rd["test2"])]  # fmt: skip
+            "--test-on", str(rd["test"]), "--test-on", str(rd["test2"]), "--no-figures"]  # fmt: skip
     out = io.StringIO()
     with contextlib.redirect_stdout(out):
         assert main(args) == 0

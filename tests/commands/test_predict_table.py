@@ -29,7 +29,7 @@ def analyzed(tmp_path_factory: pytest.TempPathFactory) -> Path:
     rd = tmp_path_factory.mktemp("predict-table") / "run"
     write_store(rd, depth_stress, sweep=SWEEP, seed=3, failed_fraction=0.0)
     with contextlib.redirect_stdout(io.StringIO()):
-        assert main(["analyze", str(rd), "--split", "geometry", *FAST]) == 0
+        assert main(["analyze", str(rd), "--split", "geometry", *FAST, "--no-figures"]) == 0
     return rd
 
 

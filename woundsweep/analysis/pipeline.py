@@ -133,6 +133,7 @@ def run_analysis(
     beside: Sequence[str | Path] = (),
     calibrate_on: str | Path | Sequence[str | Path] | None = None,
     test_on: str | Path | Sequence[str | Path] | None = None,
+    figures: bool = True,
 ) -> AnalysisOutput:
     """Fit and evaluate each scheme; write metrics, models, figures and report.md.
 
@@ -145,14 +146,11 @@ def run_analysis(
     values) whose rows calibrate the surrogate's intervals, or several: calibrated on their
     rows pooled, the coverage estimated by cross-calibration by run; ``test_on``: a run (or
     several, pooled, each also reported alone) whose rows test the surrogate and the
-    classifiers and nothing else (`woundsweep.analysis.offgrid`).
+    classifiers and nothing else (`woundsweep.analysis.offgrid`). ``figures=False`` draws
+    none (they are most of the time on a small store; the models and metrics are the same).
     """
     say = echo or (lambda _line: None)
     import xgboost as xgb
-
-    from . import figures
-    from .figures_mesh import mesh_ratio_figure
-    from .figures_profiles import profile_max_locations
 
     rd = Path(run_dir)
     if not rd.is_dir():
@@ -279,19 +277,25 @@ def run_analysis(
         files += save_model(out, f)
     if surrogate is not None:
         files += save_companions(out, surrogate, failure)
-    say("writing figures...")
-    # The closure zone's ends along the wound (Figure 2) are common to the trenches only: an
-    # excision's zone and patch scale with its length.
-    excisions = bool((rows["wound_shape"].astype(str) == "fusiform").any())
-    zone_ends = None if excisions else (1 / 3, 2 / 3)
-    stage = rows["stage"].to_numpy()
-    figs = figures.write_all(out, fits, target, stage, pairs, svs, locs, zone_ends)
-    figs += figures.save(profile_max_locations(pos, zone_ends), out, "max_location_profiles")
-    ratios, _ = matched_ratios(rows)
-    if not ratios.empty:
-        figs += figures.save(mesh_ratio_figure(ratios), out, "mesh_sensitivity")
-    if surrogate is not None:
-        figs += figures.write_surrogate(out, surrogate, rows, surrogate_metrics["sensitivity"])
+    say("writing figures..." if figures else "no figures (--no-figures)...")
+    figs: list[Path] = []
+    if figures:
+        from . import figures as drawing
+        from .figures_mesh import mesh_ratio_figure
+        from .figures_profiles import profile_max_locations
+
+        # The closure zone's ends along the wound (Figure 2) are common to the trenches only:
+        # an excision's zone and patch scale with its length.
+        excisions = bool((rows["wound_shape"].astype(str) == "fusiform").any())
+        zone_ends = None if excisions else (1 / 3, 2 / 3)
+        stage = rows["stage"].to_numpy()
+        figs = drawing.write_all(out, fits, target, stage, pairs, svs, locs, zone_ends)
+        figs += drawing.save(profile_max_locations(pos, zone_ends), out, "max_location_profiles")
+        ratios, _ = matched_ratios(rows)
+        if not ratios.empty:
+            figs += drawing.save(mesh_ratio_figure(ratios), out, "mesh_sensitivity")
+        if surrogate is not None:
+            figs += drawing.write_surrogate(out, surrogate, rows, surrogate_metrics["sensitivity"])
     files += figs
     metrics_path = out / ANALYSIS_METRICS
     atomic_write_bytes(metrics_path, json_bytes(metrics))

@@ -283,7 +283,8 @@ def render_report(metrics: dict[str, Any], figures: Sequence[str]) -> str:
         "",
         "## Figures",
         "",
-        ", ".join(f"[{name}]({name})" for name in figures if name.endswith(".png")),
+        ", ".join(f"[{name}]({name})" for name in figures if name.endswith(".png"))
+        or "None drawn (`analyze --no-figures`).",
         "",
     ]
     return "\n".join(lines)

@@ -307,7 +307,7 @@ while jobs ran, on this project's machine (two cores, shared). The results are k
 it, so the table can hold more jobs than the page, which is written anew from it
 (`charted/README.md`).
 
-Commands: `make chart`; `woundsweep generate sweeps/paper.yaml --out RUN`, `woundsweep unpack
+Commands: `make chart`, then `make atlas-page`, which runs `woundsweep generate sweeps/paper.yaml --out RUN`, `woundsweep unpack
 {table_path.as_posix()} RUN`, `{analyze_command(m)}` (settings in the report below), then
 `python scripts/atlas_page.py RUN`.{off_grid_runs(m)}
 

@@ -60,21 +60,16 @@ CHART_HOURS ?= 1
 chart: setup
 	$(PY) scripts/chart.py --sweep $(CHART_SWEEP) --table $(CHART_TABLE) --run $(CHART_RUN) --hours $(CHART_HOURS)
 
-# docs/atlas.md and docs/figures/atlas/ written anew from the kept tables: a run of each sweep
-# with its table unpacked (ATLAS_DIR, replaced), `analyze` of the paper run inside ATLAS_DIR
-# (the reports name the runs by sweep) with the GP surrogate, its intervals calibrated on
-# ATLAS_CAL pooled and tested on ATLAS_TEST; then scripts/atlas_page.py (minutes).
+# docs/atlas.md and docs/figures/atlas/ written anew from the kept tables (scripts/atlas_build.py):
+# a run of each sweep with its table unpacked (in ATLAS_DIR, replaced), `analyze` of the paper
+# run with the GP surrogate, its intervals calibrated on ATLAS_CAL pooled and tested on
+# ATLAS_TEST, `status` and `atlas` on it, each timed for the page (minutes).
 ATLAS_DIR ?= runs/atlas-page
 ATLAS_CAL ?= paper-random-1 paper-random-2
 ATLAS_TEST ?= paper-between-calibration paper-between-test
 atlas-page: setup
-	rm -rf $(ATLAS_DIR) && mkdir -p $(ATLAS_DIR)
-	@for n in paper $(ATLAS_CAL) $(ATLAS_TEST); do \
-	    $(WS) generate sweeps/$$n.yaml --out $(ATLAS_DIR)/$$n > /dev/null && \
-	    $(WS) unpack charted/$$n.parquet $(ATLAS_DIR)/$$n || exit 1; done
-	cd $(ATLAS_DIR) && $(abspath $(WS)) analyze paper --param surrogate=gp \
-	    $(foreach c,$(ATLAS_CAL),--calibrate-on $(c)) $(foreach t,$(ATLAS_TEST),--test-on $(t))
-	$(PY) scripts/atlas_page.py $(ATLAS_DIR)/paper --table charted/paper.parquet
+	$(PY) scripts/atlas_build.py --dir $(ATLAS_DIR) $(foreach c,$(ATLAS_CAL),--cal $(c)) \
+	    $(foreach t,$(ATLAS_TEST),--test $(t))
 
 # The models shipped with woundsweep (woundsweep/models/, what `predict` answers with when no
 # model is given): analyze on the charted table, the intervals calibrated on the off-grid

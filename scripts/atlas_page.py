@@ -21,6 +21,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+import woundsweep
 from woundsweep.analysis.closures import closure_rows, closure_summary
 from woundsweep.analysis.offgrid import offset_text
 from woundsweep.analysis.report import p_text
@@ -286,7 +287,40 @@ def off_grid_runs(m: dict[str, Any]) -> str:
     return f" The other runs are runs of a sweep with its kept table unpacked into them ({each})."
 
 
-def page(run: Path, table_path: Path, beside: list[Path]) -> tuple[str, dict[str, Any]]:
+def commands(timings: Path, c: dict[str, Any]) -> str:
+    """The section of the whole run's commands: each one's wall time, CPU time and peak
+    memory (`scripts/atlas_build.py`'s ``timings.json``), the kept table's size and the
+    shipped models'."""
+
+    def row(t: dict[str, Any]) -> str:
+        note = f" ({t['note']})" if t.get("note") else ""
+        return (
+            f"| `woundsweep {t['command']}`{note} | {t['wall_s']:.1f} | {t['cpu_s']:.1f} |"
+            f" {t['peak_memory_MB']:,} |"
+        )
+
+    rows = "\n".join(row(t) for t in json.loads(timings.read_text()))
+    models = Path(woundsweep.__file__).parent / "models"
+    size = sum(p.stat().st_size for p in models.iterdir() if p.is_file())
+    jobs = json.loads((models / "trained_on.json").read_text())["jobs"]
+    return f"""
+## The whole run's commands
+
+On the run of the {c["jobs"]:,} charted jobs, timed as this page was built (`make atlas-page`:
+`scripts/atlas_build.py`; two cores; the CPU time includes the command's child processes):
+
+| command | wall (s) | CPU (s) | peak memory (MB) |
+|---|---|---|---|
+{rows}
+
+The kept table is {c["bytes"] / 1e6:.2f} MB; the shipped models (`woundsweep/models/`, `make
+models`) are {size / 1e6:.2f} MB, trained on {jobs:,} jobs.
+"""
+
+
+def page(
+    run: Path, table_path: Path, beside: list[Path], timings: Path | None = None
+) -> tuple[str, dict[str, Any]]:
     """The generated part of docs/atlas.md and the charted counts."""
     analysis = run / "analysis"
     m = json.loads((analysis / "metrics.json").read_text())
@@ -307,10 +341,11 @@ while jobs ran, on this project's machine (two cores, shared). The results are k
 it, so the table can hold more jobs than the page, which is written anew from it
 (`charted/README.md`).
 
-Commands: `make chart`, then `make atlas-page`, which runs `woundsweep generate sweeps/paper.yaml --out RUN`, `woundsweep unpack
+Commands: `make chart`, then `make atlas-page` (`scripts/atlas_build.py`), which runs
+`woundsweep generate sweeps/paper.yaml --out RUN`, `woundsweep unpack
 {table_path.as_posix()} RUN`, `{analyze_command(m)}` (settings in the report below), then
 `python scripts/atlas_page.py RUN`.{off_grid_runs(m)}
-
+{commands(timings, c) if timings is not None else ""}
 ## The paper and ours, row by row
 
 {table(c, m, at_ends([run, *beside]), load)}
@@ -337,11 +372,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--beside", type=Path, action="append", default=[],
                     help="a run of the same jobs under another closing load (repeatable)")  # fmt: skip
     ap.add_argument("--out", type=Path, default=Path("docs/atlas.md"))
+    ap.add_argument("--timings", type=Path, help="scripts/atlas_build.py's timings.json")
     a = ap.parse_args(argv)
     if not (a.run / "analysis" / "metrics.json").is_file():
         print(f"atlas_page: {a.run} has no analysis (run `woundsweep analyze`)", file=sys.stderr)
         return 2
-    text, c = page(a.run, a.table, a.beside)
+    text, c = page(a.run, a.table, a.beside, a.timings)
     figdir = a.out.parent / "figures" / "atlas"
     figdir.mkdir(parents=True, exist_ok=True)
     for name in FIGURES:

@@ -93,6 +93,48 @@ def test_hand_written_part_is_kept(charted, tmp_path: Path) -> None:
     assert len(re.findall(re.escape(mod.MARK), text)) == 1
 
 
+def test_the_commands_section_states_each_timing_and_the_sizes(charted, tmp_path: Path) -> None:
+    import json
+
+    import woundsweep
+
+    rd, table, rows = charted
+    timings = tmp_path / "timings.json"
+    timings.write_text(json.dumps([
+        {"command": "status RUN", "wall_s": 1.73, "cpu_s": 1.5, "peak_memory_MB": 210},
+        {"command": "status RUN", "wall_s": 0.4, "cpu_s": 0.3, "peak_memory_MB": 90, "note": "again"},
+        {"command": "atlas RUN --views 0-9", "wall_s": 5.2, "cpu_s": 4.96, "peak_memory_MB": 1650},
+    ]))  # fmt: skip
+    out = tmp_path / "atlas.md"
+    with contextlib.redirect_stdout(io.StringIO()):
+        argv = [str(rd), "--table", str(table), "--out", str(out), "--timings", str(timings)]
+        assert _script().main(argv) == 0
+    text = out.read_text()
+    assert "| `woundsweep status RUN` | 1.7 | 1.5 | 210 |" in text
+    assert "| `woundsweep status RUN` (again) | 0.4 | 0.3 | 90 |" in text
+    assert "| `woundsweep atlas RUN --views 0-9` | 5.2 | 5.0 | 1,650 |" in text
+    assert f"On the run of the {rows['job_id'].nunique():,} charted jobs" in text
+    assert f"The kept table is {table.stat().st_size / 1e6:.2f} MB" in text
+    models = Path(woundsweep.__file__).parent / "models"
+    size = sum(p.stat().st_size for p in models.iterdir())
+    jobs = json.loads((models / "trained_on.json").read_text())["jobs"]
+    assert f"are {size / 1e6:.2f} MB, trained on {jobs:,} jobs." in text.replace("\n", " ")
+
+
+def test_atlas_build_times_a_command_and_stops_on_its_failure(monkeypatch, tmp_path) -> None:
+    monkeypatch.syspath_prepend(str(SCRIPT.parent))
+    spec = importlib.util.spec_from_file_location("atlas_build", SCRIPT.parent / "atlas_build.py")
+    assert spec is not None and spec.loader is not None
+    build = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(build)
+    with contextlib.redirect_stdout(io.StringIO()):
+        t = build.timed("generate", ["--version"], tmp_path)
+        assert t["command"] == "generate" and t["wall_s"] > 0 and t["cpu_s"] > 0
+        assert 20 < t["peak_memory_MB"] < 2000  # a Python process, in MB (not kB)
+        with pytest.raises(SystemExit, match=r"`woundsweep status nosuch` exited 2"):
+            build.timed("status", ["status", "nosuch"], tmp_path)
+
+
 def test_run_without_analysis_is_refused(tmp_path: Path, capsys) -> None:
     rd = tmp_path / "bare"
     rd.mkdir()

@@ -1,0 +1,96 @@
+"""Build docs/atlas.md from the kept tables (`make atlas-page`).
+
+    python scripts/atlas_build.py --dir runs/atlas-page \
+        --cal paper-random-1 --cal paper-random-2 \
+        --test paper-between-calibration --test paper-between-test
+
+Makes a run of each sweep (``sweeps/NAME.yaml``) with its kept table (``charted/NAME.parquet``)
+unpacked into ``DIR/NAME`` (``DIR`` replaced), analyses the paper run from inside ``DIR`` (so
+the reports name the runs by sweep) with the GP surrogate, its intervals calibrated on the
+``--cal`` runs pooled and tested on the ``--test`` runs, then runs ``status`` twice (cold, then
+from the read cache) and ``atlas --views 0-9`` on it. Each command on the paper run is timed
+(wall, CPU of the process and its children, peak memory; ``DIR/timings.json``), and
+scripts/atlas_page.py writes the page with those times.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import atlas_page
+
+PAPER = "paper"
+
+
+def timed(label: str, args: list[str], cwd: Path) -> dict[str, Any]:
+    """Run ``woundsweep ARGS`` in ``cwd``, its stdout shown; its wall time, CPU time and peak
+    memory (of the process and the children it waited for: `os.wait4`)."""
+    print(f"atlas_build: woundsweep {' '.join(args)}", flush=True)
+    t0 = time.perf_counter()
+    proc = subprocess.Popen([sys.executable, "-m", "woundsweep", *args], cwd=cwd)
+    _, status, usage = os.wait4(proc.pid, 0)
+    wall = time.perf_counter() - t0
+    proc.returncode = os.waitstatus_to_exitcode(status)
+    if proc.returncode != 0:
+        raise SystemExit(f"atlas_build: `woundsweep {' '.join(args)}` exited {proc.returncode}")
+    return {
+        "command": label,
+        "wall_s": wall,
+        "cpu_s": usage.ru_utime + usage.ru_stime,
+        "peak_memory_MB": round(usage.ru_maxrss / 1024),  # Linux: kB
+    }
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--dir", type=Path, default=Path("runs/atlas-page"),
+                    help="work directory (replaced)")  # fmt: skip
+    ap.add_argument("--cal", action="append", default=[], metavar="NAME",
+                    help="a sweep whose run calibrates the intervals (repeatable)")  # fmt: skip
+    ap.add_argument("--test", action="append", default=[], metavar="NAME",
+                    help="a sweep whose run tests the models only (repeatable)")  # fmt: skip
+    ap.add_argument("--out", type=Path, default=Path("docs/atlas.md"))
+    a = ap.parse_args(argv)
+    names = [PAPER, *a.cal, *a.test]
+    for n in names:
+        for p in (Path("sweeps") / f"{n}.yaml", Path("charted") / f"{n}.parquet"):
+            if not p.is_file():
+                ap.error(f"{p}: no such file")
+    root = Path.cwd()
+    shutil.rmtree(a.dir, ignore_errors=True)
+    a.dir.mkdir(parents=True)
+    work = a.dir.resolve()
+    times = []
+    for n in names:
+        sweep, table = root / "sweeps" / f"{n}.yaml", root / "charted" / f"{n}.parquet"
+        subprocess.run([sys.executable, "-m", "woundsweep", "generate", str(sweep), "--out", n],
+                       cwd=work, check=True, stdout=subprocess.DEVNULL)  # fmt: skip
+        t = timed(f"unpack charted/{n}.parquet RUN", ["unpack", str(table), n], work)
+        if n == PAPER:
+            times.append(t)
+    off = [x for c in a.cal for x in ("--calibrate-on", c)]
+    off += [x for t in a.test for x in ("--test-on", t)]
+    times.append(timed("status RUN", ["status", PAPER], work))
+    times.append({**timed("status RUN", ["status", PAPER], work), "note": "again: read cache"})
+    analyze = ["analyze", PAPER, "--param", "surrogate=gp", *off]
+    times.append(timed(" ".join([*analyze[:1], "RUN", *analyze[2:]]), analyze, work))
+    times.append(
+        timed("atlas RUN --views 0-9", ["atlas", PAPER, "--out", "atlas", "--views", "0-9"], work)
+    )
+    (work / "timings.json").write_text(json.dumps(times, indent=1) + "\n")
+    return atlas_page.main(
+        [str(work / PAPER), "--table", "charted/paper.parquet", "--out", str(a.out),
+         "--timings", str(work / "timings.json")]
+    )  # fmt: skip
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -16,7 +16,7 @@ from cli_run import ws
 SMALL = [
     "--length-mm", "9", "--width-mm", "3", "--dermis-mm", "1.5", "--subcutis-mm", "1.5",
     "--depth-mm", "2.4", "--sutures", "3", "--angle-deg", "25", "--element", "1",
-    "--mesh-factor", "0.18",
+    "--mesh-factor", "0.12",
 ]  # fmt: skip
 
 
@@ -50,7 +50,7 @@ def test_case_writes_its_report(tmp_path: Path) -> None:
     check = data["mesh_check"]
     # At least 8 times the factor (the size law's halving), raised until the elements at the
     # wound are half as large as the case's.
-    assert check["mesh_size_factor"] >= 8 * 0.18 and len(check["relative_change"]) == 3
+    assert check["mesh_size_factor"] >= 8 * 0.12 and len(check["relative_change"]) == 3
     assert check["element_size_ratio_at_wound"] >= 2.0
     # The same wound along the Langer line.
     assert len(data["along_langer_force_mN"]) == 3
@@ -60,7 +60,7 @@ def test_case_writes_its_report(tmp_path: Path) -> None:
         assert f"## {head}" in report, head
     # Three meshes, each finer than the last.
     levels = data["mesh_levels"]
-    assert [lv["mesh_size_factor"] for lv in levels] == pytest.approx([0.18, 0.405, 0.91125])
+    assert [lv["mesh_size_factor"] for lv in levels] == pytest.approx([0.12, 0.27, 0.6075])
     assert levels[0]["dofs"] < levels[1]["dofs"] < levels[2]["dofs"]
     assert res.stdout.rstrip().endswith(f"wrote {out / 'report.md'}")
 

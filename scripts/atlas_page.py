@@ -314,7 +314,10 @@ On the run of the {c["jobs"]:,} charted jobs, timed as this page was built (`mak
 {rows}
 
 The kept table is {c["bytes"] / 1e6:.2f} MB; the shipped models (`woundsweep/models/`, `make
-models`) are {size / 1e6:.2f} MB, trained on {jobs:,} jobs.
+models`) are {size / 1e6:.2f} MB, trained on {jobs:,} jobs. The table keeps no fields, so
+`atlas` draws no 3D view here (each job page says so); on a run that stores them (`run
+--fields final`) `--views` draws the chosen jobs', and `make bench-scale` times that on the
+whole grid.
 """
 
 

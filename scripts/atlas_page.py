@@ -21,10 +21,10 @@ import sys
 from pathlib import Path
 from typing import Any
 
-import woundsweep
 from woundsweep.analysis.closures import closure_rows, closure_summary
 from woundsweep.analysis.offgrid import offset_text
 from woundsweep.analysis.report import p_text
+from woundsweep.analysis.shipped import models_dir, read_record
 from woundsweep.config.manifest import load_run
 from woundsweep.core.errors import StoreError, SweepError
 from woundsweep.execution.summary import busy_seconds
@@ -300,9 +300,9 @@ def commands(timings: Path, c: dict[str, Any]) -> str:
         )
 
     rows = "\n".join(row(t) for t in json.loads(timings.read_text()))
-    models = Path(woundsweep.__file__).parent / "models"
+    models = models_dir()
     size = sum(p.stat().st_size for p in models.iterdir() if p.is_file())
-    jobs = json.loads((models / "trained_on.json").read_text())["jobs"]
+    jobs = read_record(models)["jobs"]
     return f"""
 ## The whole run's commands
 

@@ -7,7 +7,7 @@ WS      := $(VENV)/bin/woundsweep
 DEMO_DIR ?= runs/demo
 PYTEST_ARGS ?=
 
-.PHONY: setup test-deps test test-fast test-dolfinx-latest verify demo chart atlas-page models bench bench-convergence bench-scale lint format clean
+.PHONY: setup test-deps test test-fast test-dolfinx-latest verify demo chart chart-code atlas-page models bench bench-convergence bench-scale lint format clean
 
 setup:
 	@bash scripts/setup.sh
@@ -57,19 +57,30 @@ CHART_SWEEP ?= sweeps/paper.yaml
 CHART_TABLE ?= charted/paper.parquet
 CHART_RUN ?= runs/chart-paper
 CHART_HOURS ?= 1
+CHART_SHARDS ?= 486
 chart: setup
-	$(PY) scripts/chart.py --sweep $(CHART_SWEEP) --table $(CHART_TABLE) --run $(CHART_RUN) --hours $(CHART_HOURS)
+	$(PY) scripts/chart.py --sweep $(CHART_SWEEP) --table $(CHART_TABLE) --run $(CHART_RUN) \
+	    --shards $(CHART_SHARDS) --hours $(CHART_HOURS)
+
+# The published code's closure on every wound of the grid once (sweeps/paper-code-slice.yaml:
+# t_d = 1 mm, mesh factor 0.5; 972 jobs in 41 shards), kept in charted/paper-code-slice.parquet.
+chart-code:
+	$(MAKE) chart CHART_SWEEP=sweeps/paper-code-slice.yaml CHART_TABLE=charted/paper-code-slice.parquet \
+	    CHART_RUN=runs/chart-paper-code-slice CHART_SHARDS=41
 
 # docs/atlas.md and docs/figures/atlas/ written anew from the kept tables (scripts/atlas_build.py):
 # a run of each sweep with its table unpacked (in ATLAS_DIR, replaced), `analyze` of the paper
 # run with the GP surrogate, its intervals calibrated on ATLAS_CAL pooled and tested on
-# ATLAS_TEST, `status` and `atlas` on it, each timed for the page (minutes).
+# ATLAS_TEST, Figure 2 beside that of each ATLAS_BESIDE run (paper jobs under another closing
+# load: the paper-code slice once charted/paper-code-slice.parquet exists), `status` and
+# `atlas` on it, each timed for the page (minutes).
 ATLAS_DIR ?= runs/atlas-page
 ATLAS_CAL ?= paper-random-1 paper-random-2
 ATLAS_TEST ?= paper-between-calibration paper-between-test
+ATLAS_BESIDE ?= $(if $(wildcard charted/paper-code-slice.parquet),paper-code-slice)
 atlas-page: setup
 	$(PY) scripts/atlas_build.py --dir $(ATLAS_DIR) $(foreach c,$(ATLAS_CAL),--cal $(c)) \
-	    $(foreach t,$(ATLAS_TEST),--test $(t))
+	    $(foreach t,$(ATLAS_TEST),--test $(t)) $(foreach b,$(ATLAS_BESIDE),--beside $(b))
 
 # The models shipped with woundsweep (woundsweep/models/, what `predict` answers with when no
 # model is given): analyze on the charted table, the intervals calibrated on the off-grid

@@ -7,7 +7,8 @@
 Makes a run of each sweep (``sweeps/NAME.yaml``) with its kept table (``charted/NAME.parquet``)
 unpacked into ``DIR/NAME`` (``DIR`` replaced), analyses the paper run from inside ``DIR`` (so
 the reports name the runs by sweep) with the GP surrogate, its intervals calibrated on the
-``--cal`` runs pooled and tested on the ``--test`` runs, then runs ``status`` twice (cold, then
+``--cal`` runs pooled and tested on the ``--test`` runs, Figure 2 of each ``--beside`` run (the
+same jobs under another closing load) drawn beside its own, then runs ``status`` twice (cold, then
 from the read cache) and ``atlas --views 0-9`` on it. Each command on the paper run is timed
 (wall, CPU of the process and its children, peak memory; ``DIR/timings.json``), and
 scripts/atlas_page.py writes the page with those times.
@@ -57,9 +58,11 @@ def main(argv: list[str] | None = None) -> int:
                     help="a sweep whose run calibrates the intervals (repeatable)")  # fmt: skip
     ap.add_argument("--test", action="append", default=[], metavar="NAME",
                     help="a sweep whose run tests the models only (repeatable)")  # fmt: skip
+    ap.add_argument("--beside", action="append", default=[], metavar="NAME",
+                    help="a sweep of paper jobs under another closing load (repeatable)")  # fmt: skip
     ap.add_argument("--out", type=Path, default=Path("docs/atlas.md"))
     a = ap.parse_args(argv)
-    names = [PAPER, *a.cal, *a.test]
+    names = [PAPER, *a.cal, *a.test, *a.beside]
     for n in names:
         for p in (Path("sweeps") / f"{n}.yaml", Path("charted") / f"{n}.parquet"):
             if not p.is_file():
@@ -78,6 +81,7 @@ def main(argv: list[str] | None = None) -> int:
             times.append(t)
     off = [x for c in a.cal for x in ("--calibrate-on", c)]
     off += [x for t in a.test for x in ("--test-on", t)]
+    off += [x for b in a.beside for x in ("--beside", b)]
     times.append(timed("status RUN", ["status", PAPER], work))
     times.append({**timed("status RUN", ["status", PAPER], work), "note": "again: read cache"})
     analyze = ["analyze", PAPER, "--param", "surrogate=gp", *off]
@@ -88,7 +92,8 @@ def main(argv: list[str] | None = None) -> int:
     (work / "timings.json").write_text(json.dumps(times, indent=1) + "\n")
     return atlas_page.main(
         [str(work / PAPER), "--table", "charted/paper.parquet", "--out", str(a.out),
-         "--timings", str(work / "timings.json")]
+         "--timings", str(work / "timings.json"),
+         *[x for b in a.beside for x in ("--beside", str(work / b))]]
     )  # fmt: skip
 
 

@@ -184,3 +184,46 @@ def test_off_grid_rows_carry_the_coverage_interval_and_each_fold() -> None:
     assert mod.analyze_command(m).endswith("--calibrate-on CAL2 --test-on TEST1 --test-on TEST2")
     # Runs not on this machine are named by their folders.
     assert mod.off_grid_runs(m).endswith("TEST2: `sweeps/U.yaml`, `charted/U.parquet`).")
+
+
+def test_a_closure_beside_is_compared_on_the_jobs_both_runs_have(charted, tmp_path: Path) -> None:
+    """A paper-code run of a slice (orientation 0) beside the charted run: a row for the run's
+    closure on every job, then both closures on the slice's jobs, each share recomputed."""
+    rd, table, rows = charted
+    code = tmp_path / "code"
+    sweep = {
+        **PREDICT_SWEEP,
+        "grid": {**PREDICT_SWEEP["grid"], "orientation_deg": [0]},
+        "stages": {
+            "closure_zone": {"y_fraction": 0.5, "depth_fraction": 0.5, "depth_per_w": 0.35},
+            "closure_load": "paper-code",
+        },
+    }
+    crow = write_store(code, depth_stress, sweep=sweep, seed=6)
+    crow["profile_along_wound_max_at_mm"] = crow["max_location_y_mm"]
+    write_results(code, crow)
+    out = tmp_path / "atlas.md"
+    argv = [str(rd), "--table", str(table), "--out", str(out), "--beside", str(code)]
+    with contextlib.redirect_stdout(io.StringIO()):
+        assert _script().main(argv) == 0
+    text = out.read_text()
+    shared = set(rows["job_id"]) & set(crow["job_id"])
+    assert 0 < len(shared) == rows.loc[rows["orientation_deg"] == 0, "job_id"].nunique()
+
+    def share(r, stage: int, ends: tuple[float, float]) -> str:
+        s = r[(r["stage"] == stage) & (r["status"] == "converged") & r["job_id"].isin(shared)]
+        L = s["patch_half_length_mm"].to_numpy(dtype=float)
+        t = (s["profile_along_wound_max_at_mm"].to_numpy(dtype=float) + L) / (2 * L)
+        near = np.minimum(abs(t - ends[0]), abs(t - ends[1])) <= 0.05
+        return f"{100 * near.mean():.0f} % of {len(s):,};"
+
+    n = f"{len(shared):,}"
+    assert _row(text, "Figure 2, along-wound maximum at the zone's ends (reactions closure, every")
+    own = _row(
+        text, f"Figure 2, along-wound maximum at the zone's ends (reactions closure, the {n}"
+    )
+    assert own[2].startswith(share(rows, 2, (1 / 3, 2 / 3)))
+    theirs = _row(
+        text, f"Figure 2, along-wound maximum at the zone's ends (paper-code closure, the {n}"
+    )
+    assert theirs[2].startswith(share(crow, 2, (0.25, 0.75)))

@@ -43,6 +43,17 @@ def test_maxima_at_each_closures_own_zone_ends_are_counted() -> None:
     assert report_lines({"closures": {"reactions": out["reactions"]}}) == []
 
 
+def test_runs_are_compared_on_the_jobs_they_share() -> None:
+    # A slice of the grid beside the whole: the whole run's other jobs are left out.
+    reactions = _rows([1 / 3, 2 / 3, 0.5, 0.5], [1, 1, 1, 1], 2).assign(job_id=list("abcd"))
+    code = _rows([0.5, 0.25], [0, 1], 3).assign(job_id=["b", "e"])
+    out = closure_summary([(reactions, "reactions", 1 / 3), (code, "paper-code", 0.5)])
+    assert out["reactions"]["jobs"] == out["paper-code"]["jobs"] == 1
+    assert out["reactions"]["groups"]["stage 2"] == {"rows": 1, "closed": 1, "at_zone_ends": 1.0}
+    assert out["paper-code"]["groups"]["stages 3-6"]["rows"] == 1
+    assert "On the jobs every run has (1)" in "\n".join(report_lines({"closures": out}))
+
+
 def test_beside_a_run_with_the_same_closure_is_refused(tmp_path, capsys) -> None:
     sweep = {**SMALL_SWEEP, "grid": {**SMALL_SWEEP["grid"], "dermal_thickness_mm": [1],
                                      "orientation_deg": [0], "skin_type": ["normal"]}}  # fmt: skip

@@ -195,6 +195,28 @@ def test_paper_code_preset_is_the_paper_grid_with_the_code_closure() -> None:
     assert zone.depth_fraction_for(2.0, 0.5) == 1.0
 
 
+def test_paper_code_slice_is_every_wound_of_the_grid_once() -> None:
+    """sweeps/paper-code-slice.yaml: the paper-code preset's jobs at t_d = 1 mm and mesh factor
+    0.5 (the same ids), one job per combination of the other factors: 972 of 11,664."""
+    from woundsweep.config.manifest import expand
+
+    code, cut = (
+        load_sweep(PAPER.parent / "paper-code.yaml"),
+        load_sweep(PAPER.parent / "paper-code-slice.yaml"),
+    )
+    assert (cut.stages, cut.materials, cut.solver) == (code.stages, code.materials, code.solver)
+    full, part = expand(code), expand(cut)
+    on = full[(full["dermal_thickness_mm"] == 1) & (full["mesh_size_factor"] == 0.5)]
+    assert len(part) == len(on) == 972
+    assert sorted(part["job_id"]) == sorted(on["job_id"])
+    factors = [
+        "wound_shape", "subcutis_thickness_factor", "patch_size_factor", "wound_width_factor",
+        "wound_depth_factor", "wound_aspect_factor", "skin_type", "orientation_deg",
+    ]  # fmt: skip
+    assert not part[factors].astype(str).duplicated().any()
+    assert len(full[factors].astype(str).drop_duplicates()) == 972
+
+
 def test_between_sweeps_lie_between_the_paper_grid_values() -> None:
     """sweeps/paper-between-{calibration,test}.yaml: the paper's settings, every factor strictly
     inside the grid's range and on none of its values, the two sets on different values, and

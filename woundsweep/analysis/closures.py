@@ -2,9 +2,11 @@
 runs given with ``analyze --beside``, each closed by its sweep's ``stages.closure_load``.
 
 Every converged row with a position counts, reopened or not: where the along-wound maximum
-sits under a closure is the question, whether or not the closure holds the wound. Per run and
-stage group: the rows, the closed ones (stages 2-6) and the share of rows whose along-wound
-maximum lies within `ENDS_TOL` of the line's length of its closure zone's ends.
+sits under a closure is the question, whether or not the closure holds the wound. The runs are
+compared on the jobs they all have (a run of a slice of the grid beside the whole grid is
+compared on the slice). Per run and stage group: the rows, the closed ones (stages 2-6) and the
+share of rows whose along-wound maximum lies within `ENDS_TOL` of the line's length of its
+closure zone's ends.
 """
 
 from __future__ import annotations
@@ -24,7 +26,9 @@ from .settings import STAGE_GROUPS
 if TYPE_CHECKING:
     from ..config.manifest import Run
 
-__all__ = ["ENDS_TOL", "closure_entry", "closure_rows", "closure_summary", "report_lines"]
+__all__ = [
+    "ENDS_TOL", "closure_entry", "closure_rows", "closure_summary", "common_jobs", "report_lines",
+]  # fmt: skip
 
 ENDS_TOL = 0.05
 
@@ -46,11 +50,22 @@ def closure_rows(run_dir: str | Path) -> tuple[pd.DataFrame, str, float]:
     return closure_entry(drop_orphans(load_results(rd, run), run)[0], run)
 
 
+def common_jobs(
+    runs: list[tuple[pd.DataFrame, str, float]],
+) -> list[tuple[pd.DataFrame, str, float]]:
+    """Each run's rows of the jobs every run has (runs without a ``job_id`` column whole)."""
+    if len(runs) < 2 or any("job_id" not in r[0] for r in runs):
+        return runs
+    shared = set.intersection(*(set(r[0]["job_id"]) for r in runs))
+    return [(r[r["job_id"].isin(shared)], load, y) for r, load, y in runs]
+
+
 def closure_summary(runs: list[tuple[pd.DataFrame, str, float]]) -> dict[str, Any]:
-    """metrics.json's ``closures``: per closing load and stage group the rows, the closed rows
-    and the share of along-wound maxima at the zone's ends."""
+    """metrics.json's ``closures``: per closing load, on the jobs every run has (their number),
+    and per stage group the rows, the closed rows and the share of along-wound maxima at the
+    zone's ends."""
     out: dict[str, Any] = {}
-    for rows, load, y_fraction in runs:
+    for rows, load, y_fraction in common_jobs(runs):
         ends = (0.5 - y_fraction / 2, 0.5 + y_fraction / 2)
         groups: dict[str, Any] = {}
         for name, stages in STAGE_GROUPS:
@@ -66,7 +81,8 @@ def closure_summary(runs: list[tuple[pd.DataFrame, str, float]]) -> dict[str, An
                 "closed": int(np.nansum(closed == 1)) if min(stages) >= 2 else None,
                 "at_zone_ends": float(near[ok].mean()) if ok.any() else None,
             }
-        out[load] = {"zone_ends": list(ends), "groups": groups}
+        jobs = int(rows["job_id"].nunique()) if "job_id" in rows else None
+        out[load] = {"zone_ends": list(ends), "jobs": jobs, "groups": groups}
     return out
 
 
@@ -79,7 +95,9 @@ def report_lines(metrics: dict[str, Any]) -> list[str]:
         "",
         "## The closing loads side by side (Figure 2 per closure)",
         "",
-        "Every converged row counts here, reopened or not; `max_location_profiles` shows the "
+        "On the jobs every run has"
+        + (f" ({jobs:,})" if (jobs := next(iter(closures.values())).get("jobs")) else "")
+        + "; every converged row counts, reopened or not; `max_location_profiles` shows the "
         "positions per closure side by side. At the zone's ends: the along-wound maximum within "
         f"{ENDS_TOL} of the line's length of the closure zone's ends.",
         "",

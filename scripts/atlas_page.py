@@ -56,6 +56,16 @@ def _pct(a: float, b: float) -> str:
     return f"{100 * a / b:.1f} %" if b else "n/a"
 
 
+def _sample(c: dict[str, Any]) -> str:
+    """How the charted jobs were taken."""
+    if c["jobs"] == c["total"]:
+        return "the whole grid, charted in whole shards of 486"
+    return (
+        "whole shards of 486 taken in a fixed random order, so the charted share is a random "
+        "sample of the grid's shards"
+    )
+
+
 def charted(table: Path, run: Path) -> dict[str, Any]:
     """What the packed table holds: jobs, rows, converged rows, jobs through six stages per
     orientation, CPU time, the wall time while jobs ran and the table's size."""
@@ -350,15 +360,14 @@ def page(
     text = f"""# The atlas charted
 
 This page is built from {c["jobs"]:,} of the {c["total"]:,} jobs of `sweeps/paper.yaml`
-({_pct(c["jobs"], c["total"])}; P2, the `{load}` closure), whole shards of 486 taken in a fixed
-random order, so the charted share is a random sample of the grid's shards. CPU:
+({_pct(c["jobs"], c["total"])}; P2, the `{load}` closure), {_sample(c)}. CPU:
 {c["cpu_h"]:.1f} CPU-hours, {c["cpu_per_job"]:.1f} s a job; {c["wall_h"]:.1f} hours of wall time
 while jobs ran, on this project's machine (two cores, shared). The results are kept in
 `{table_path.as_posix()}` ({c["bytes"] / 1e6:.2f} MB at the time); `make chart` continues from
 it, so the table can hold more jobs than the page, which is written anew from it
 (`charted/README.md`).
 
-Commands: `make chart`, then `make atlas-page` (`scripts/atlas_build.py`), which runs
+Commands: `make chart`, `make models`, then `make atlas-page` (`scripts/atlas_build.py`), which runs
 `woundsweep generate sweeps/paper.yaml --out RUN`, `woundsweep unpack
 {table_path.as_posix()} RUN`, `{analyze_command(m)}` (settings in the report below), then
 `python scripts/atlas_page.py RUN`.{off_grid_runs(m)}

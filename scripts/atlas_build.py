@@ -31,13 +31,31 @@ import atlas_page
 PAPER = "paper"
 
 
+def _hwm_mb(pid: int) -> float:
+    """The process's peak resident memory so far (Linux ``VmHWM``), MB; 0 once it is gone."""
+    try:
+        status = Path(f"/proc/{pid}/status").read_text()
+    except OSError:
+        return 0.0
+    kb = next((line.split()[1] for line in status.splitlines() if line.startswith("VmHWM:")), 0)
+    return int(kb) / 1024
+
+
 def timed(label: str, args: list[str], cwd: Path) -> dict[str, Any]:
-    """Run ``woundsweep ARGS`` in ``cwd``, its stdout shown; its wall time, CPU time and peak
-    memory (of the process and the children it waited for: `os.wait4`)."""
+    """Run ``woundsweep ARGS`` in ``cwd``, its stdout shown; its wall time, CPU time (of the
+    process and the children it waited for: `os.wait4`) and peak memory. The peak is the
+    command's own (``VmHWM``, read while it runs): `os.wait4`'s ``ru_maxrss`` would count this
+    script's memory too, which a spawned process inherits on Linux."""
     print(f"atlas_build: woundsweep {' '.join(args)}", flush=True)
     t0 = time.perf_counter()
     proc = subprocess.Popen([sys.executable, "-m", "woundsweep", *args], cwd=cwd)
-    _, status, usage = os.wait4(proc.pid, 0)
+    peak = 0.0
+    while True:
+        pid, status, usage = os.wait4(proc.pid, os.WNOHANG)
+        if pid:
+            break
+        peak = max(peak, _hwm_mb(proc.pid))
+        time.sleep(0.02)
     wall = time.perf_counter() - t0
     proc.returncode = os.waitstatus_to_exitcode(status)
     if proc.returncode != 0:
@@ -46,7 +64,7 @@ def timed(label: str, args: list[str], cwd: Path) -> dict[str, Any]:
         "command": label,
         "wall_s": wall,
         "cpu_s": usage.ru_utime + usage.ru_stime,
-        "peak_memory_MB": round(usage.ru_maxrss / 1024),  # Linux: kB
+        "peak_memory_MB": round(peak),
     }
 
 

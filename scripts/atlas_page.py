@@ -18,6 +18,7 @@ import json
 import re
 import shutil
 import sys
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -284,13 +285,15 @@ def _other_runs(m: dict[str, Any]) -> list[tuple[str, str | None]]:
     ]
 
 
-def analyze_command(m: dict[str, Any]) -> str:
-    """The `woundsweep analyze` call that wrote ``metrics.json`` (its non-default parts)."""
+def analyze_command(m: dict[str, Any], beside: Sequence[Path] = ()) -> str:
+    """The `woundsweep analyze` call that wrote ``metrics.json`` (its non-default parts), with
+    a ``--beside BESIDEi`` for each run of another closing load."""
     parts = ["woundsweep analyze RUN"]
     if m.get("settings", {}).get("surrogate", "trees") != "trees":
         parts.append(f"--param surrogate={m['settings']['surrogate']}")
     for name, _ in _other_runs(m):
         parts.append(f"--{'calibrate' if name.startswith('CAL') else 'test'}-on {name}")
+    parts += [f"--beside BESIDE{i + 1}" for i in range(len(beside))]
     return " ".join(parts)
 
 
@@ -301,10 +304,11 @@ def _sweep_name(run: str) -> str:
         return Path(run).name
 
 
-def off_grid_runs(m: dict[str, Any]) -> str:
+def off_grid_runs(m: dict[str, Any], beside: Sequence[Path] = ()) -> str:
     """What each placeholder of `analyze_command` stands for: a run of a sweep with its kept
     table unpacked into it."""
     named = [(k, _sweep_name(r)) for k, r in _other_runs(m) if r is not None]
+    named += [(f"BESIDE{i + 1}", _sweep_name(str(b))) for i, b in enumerate(beside)]
     if not named:
         return ""
     each = "; ".join(f"{k}: `sweeps/{n}.yaml`, `charted/{n}.parquet`" for k, n in named)
@@ -369,8 +373,8 @@ it, so the table can hold more jobs than the page, which is written anew from it
 
 Commands: `make chart`, `make models`, then `make atlas-page` (`scripts/atlas_build.py`), which runs
 `woundsweep generate sweeps/paper.yaml --out RUN`, `woundsweep unpack
-{table_path.as_posix()} RUN`, `{analyze_command(m)}` (settings in the report below), then
-`python scripts/atlas_page.py RUN`.{off_grid_runs(m)}
+{table_path.as_posix()} RUN`, `{analyze_command(m, beside)}` (settings in the report below),
+then `python scripts/atlas_page.py RUN`.{off_grid_runs(m, beside)}
 {commands(timings, c) if timings is not None else ""}
 ## The paper and ours, row by row
 

@@ -232,3 +232,5 @@ def test_a_closure_beside_is_compared_on_the_jobs_both_runs_have(charted, tmp_pa
         text, f"Figure 2, along-wound maximum at the zone's ends (paper-code closure, the {n}"
     )
     assert theirs[2].startswith(share(crow, 2, (0.25, 0.75)))
+    flat = text.replace("\n", " ")
+    assert "--beside BESIDE1`" in flat and "BESIDE1: `sweeps/synthetic.yaml`" in flat

@@ -24,7 +24,9 @@ from typing import Any
 
 from woundsweep.analysis.closures import closure_rows, closure_summary
 from woundsweep.analysis.offgrid import offset_text
+from woundsweep.analysis.paper import stiff_vs_soft
 from woundsweep.analysis.report import p_text
+from woundsweep.analysis.settings import STRESS
 from woundsweep.analysis.shipped import models_dir, read_record
 from woundsweep.config.manifest import load_run
 from woundsweep.core.errors import StoreError, SweepError
@@ -148,6 +150,24 @@ def _stiff(m: dict[str, Any], shape: str) -> str:
     )
 
 
+def stiff_beside(beside: Sequence[Path]) -> list[str]:
+    """Table rows: stiff > soft per shape under each ``--beside`` run's closing load, over its
+    converged rows with a stress (reopened or not, as the paper counted), paired as the
+    analysis pairs them (same geometry, orientation and stage)."""
+    lines = []
+    for other in beside:
+        rows, load, _ = closure_rows(other)
+        rows = rows[rows[STRESS] > 0]
+        svs, _ = stiff_vs_soft(rows)
+        jobs = rows["job_id"].nunique()
+        for shape, label in (("cylindrical", "curved wounds"), ("wedge", "wedges")):
+            lines.append(
+                f"| stiff > soft, {label} ({load} closure, the {jobs:,} jobs of {other.name})"
+                f" | {PAPER[shape]} | {_stiff({'stiff_vs_soft': svs}, shape)} |"
+            )
+    return lines
+
+
 def _ranking(names: list[str], n: int = 4) -> str:
     return ", ".join(names[:n]) if names else "n/a"
 
@@ -211,7 +231,12 @@ def _off_grid(m: dict[str, Any]) -> list[str]:
     ]
 
 
-def table(c: dict[str, Any], m: dict[str, Any], ends: list[tuple[str, dict[str, str]]]) -> str:
+def table(
+    c: dict[str, Any],
+    m: dict[str, Any],
+    ends: list[tuple[str, dict[str, str]]],
+    stiff_rows: Sequence[str] = (),
+) -> str:
     """The side-by-side table, one row per result of the paper and what the project adds."""
     rows = m["rows"]
     rnd, geo = m["schemes"].get("random", {}), m["schemes"].get("geometry", {})
@@ -231,6 +256,7 @@ def table(c: dict[str, Any], m: dict[str, Any], ends: list[tuple[str, dict[str, 
         f"| stiff > soft, curved wounds (sign test) | {PAPER['cylindrical']} |"
         f" {_stiff(m, 'cylindrical')} |",
         f"| stiff > soft, wedges (sign test) | {PAPER['wedge']} | {_stiff(m, 'wedge')} |",
+        *stiff_rows,
         f"| rows modelled | {PAPER['modelled']} | {rows['used_rows']:,}"
         f" ({rows.get('duplicate_rows', 0):,} repeating an earlier stage's state left out;"
         f" {rows.get('interpenetrating_rows', 0):,} with flanks inside each other kept) |",
@@ -378,7 +404,7 @@ then `python scripts/atlas_page.py RUN`.{off_grid_runs(m, beside)}
 {commands(timings, c) if timings is not None else ""}
 ## The paper and ours, row by row
 
-{table(c, m, figure2_rows(run, beside, load))}
+{table(c, m, figure2_rows(run, beside, load), stiff_beside(beside))}
 
 Figure 3's panels: A and B `training_random.png`, C `importance_random.png`, D `roc_random.png`.
 

@@ -232,5 +232,16 @@ def test_a_closure_beside_is_compared_on_the_jobs_both_runs_have(charted, tmp_pa
         text, f"Figure 2, along-wound maximum at the zone's ends (paper-code closure, the {n}"
     )
     assert theirs[2].startswith(share(crow, 2, (0.25, 0.75)))
+    # Stiff > soft under the closure beside, from its own rows (every converged one with a
+    # stress, paired by geometry, orientation and stage).
+    ok = crow[(crow["status"] == "converged") & (crow["p99_von_mises_kPa"] > 0)]
+    key = ["geometry_id", "orientation_deg", "stage"]
+    st, so = (ok[ok["skin_type"] == k].set_index(key) for k in ("stiff", "soft"))
+    both = st.join(so["p99_von_mises_kPa"].rename("soft"), how="inner")
+    for shape, label in (("cylindrical", "curved wounds"), ("wedge", "wedges")):
+        p = both[both["wound_shape"] == shape]
+        up = int((p["p99_von_mises_kPa"] > p["soft"]).sum())
+        cell = _row(text, f"stiff > soft, {label} (paper-code closure")[2]
+        assert cell.startswith(f"{100 * up / len(p):.1f} % ({up:,}/{len(p):,})")
     flat = text.replace("\n", " ")
     assert "--beside BESIDE1`" in flat and "BESIDE1: `sweeps/synthetic.yaml`" in flat

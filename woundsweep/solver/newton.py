@@ -171,13 +171,7 @@ class NewtonSolver:
         self.A.setOption(PETSc.Mat.Option.KEEP_NONZERO_PATTERN, True)
         self.b, self.dx = A.createVecs()[1], A.createVecs()[0]
         self.rvec = self.b.duplicate()
-        self.ksp = PETSc.KSP().create(A.getComm())
-        self.ksp.setOperators(A)
-        self.ksp.setType("preonly")
-        pc = self.ksp.getPC()
-        pc.setType("lu")
-        pc.setFactorSolverType("mumps")
-        self.ksp.setErrorIfNotConverged(False)
+        self.ksp: PETSc.KSP | None = None  # made for each new operator (`_direct_solver`)
         self._factored = False
         self._pc_kind = "lu"
         self.gamma = 1.0
@@ -185,6 +179,23 @@ class NewtonSolver:
         self._sub: Subspace | None = None
         self._low_rank = getattr(problem, "low_rank", None)
         self._woodbury: LowRankUpdate | None = None  # the current step's low-rank term
+
+    def _direct_solver(self, op: PETSc.Mat, kind: str) -> None:
+        """A new MUMPS solver (``kind``: lu or cholesky) for ``op``, the old one destroyed. A new
+        solver, not the old one's PC pointed at the new matrix: that left the old factorisation
+        allocated (60-80 MB at each growth of a contact stage's pattern, GBs over a long stage)
+        and gave the new factor MUMPS's default workspace."""
+        if self.ksp is not None:
+            self.ksp.destroy()
+        self.ksp = PETSc.KSP().create(op.getComm())
+        self.ksp.setType("preonly")
+        self.ksp.setErrorIfNotConverged(False)
+        pc = self.ksp.getPC()
+        pc.setType(kind)
+        pc.setFactorSolverType("mumps")
+        self.ksp.setOperators(op)
+        pc.setFactorSetUpSolverType()
+        pc.getFactorMatrix().setMumpsIcntl(14, 100)  # headroom: fewer -9 failures on 3D meshes
 
     def set_symmetry(self, basis: SymmetryBasis | None) -> None:
         """Solve the linear systems in the span of ``basis.P`` (`woundsweep.solver.symmetry`),
@@ -242,17 +253,12 @@ class NewtonSolver:
             op, new = self._sub.operator(self.A)
             self._factored = self._factored and not new  # a new matrix: analysed again
         if kind != self._pc_kind:
-            self.ksp.getPC().setType(kind)
-            self.ksp.getPC().setFactorSolverType("mumps")
             self._pc_kind = kind
             self._factored = False
-        if not self._factored:
-            self.ksp.setOperators(op)
-            pc = self.ksp.getPC()
-            pc.setFactorSetUpSolverType()
-            F = pc.getFactorMatrix()
-            F.setMumpsIcntl(14, 100)  # workspace headroom: fewer -9 failures on 3D meshes
+        if not self._factored or self.ksp is None:
+            self._direct_solver(op, kind)
             self._factored = True
+        assert self.ksp is not None
         self.ksp.setUp()
         self.ksp.getPC().setUp()  # numeric factorisation now, so it is timed on its own
         self._woodbury = None
@@ -263,12 +269,14 @@ class NewtonSolver:
 
     def _apply_inverse(self, rhs: np.ndarray) -> np.ndarray:
         """A^-1 rhs with the current factors (in the symmetric subspace if set)."""
+        ksp = self.ksp
+        assert ksp is not None, "no factorisation yet"
         self.b.getArray()[:] = rhs
         if self._sub is None:
-            self.ksp.solve(self.b, self.dx)
+            ksp.solve(self.b, self.dx)
         else:
-            self._sub.solve(self.ksp, self.b, self.dx)
-        if self.ksp.getConvergedReason() < 0:
+            self._sub.solve(ksp, self.b, self.dx)
+        if ksp.getConvergedReason() < 0:
             return np.full(len(rhs), np.nan)
         return self.dx.getArray(readonly=True).copy()
 

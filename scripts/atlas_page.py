@@ -95,12 +95,12 @@ def charted(table: Path, run: Path) -> dict[str, Any]:
     }
 
 
-def at_ends(runs: list[Path]) -> dict[str, dict[str, str]]:
+def at_ends(runs: list[tuple[Any, str, float]]) -> dict[str, dict[str, str]]:
     """Per closing load and stage group: the share of converged rows whose along-wound maximum
     lies near the closure zone's ends (`woundsweep.analysis.closures`; with several runs, on
     the jobs they all have); ``jobs`` the number of jobs counted."""
     out: dict[str, dict[str, str]] = {}
-    for load, entry in closure_summary([closure_rows(r) for r in runs]).items():
+    for load, entry in closure_summary(runs).items():
         out[load] = {
             k: f"{100 * g['at_zone_ends']:.0f} % of {g['rows']:,}"
             if g["at_zone_ends"] is not None
@@ -111,15 +111,16 @@ def at_ends(runs: list[Path]) -> dict[str, dict[str, str]]:
     return out
 
 
-def figure2_rows(run: Path, beside: list[Path], load: str) -> list[tuple[str, dict[str, str]]]:
+def figure2_rows(
+    own: tuple[Any, str, float], beside: dict[str, tuple[Any, str, float]]
+) -> list[tuple[str, dict[str, str]]]:
     """The Figure 2 rows, (label, `at_ends` groups): the run's closure on every charted job,
-    then, for each ``--beside`` run, both closures on the jobs the two runs share."""
-    rows = [(f"{load} closure, every charted job", at_ends([run])[load])]
-    for other in beside:
-        pair = at_ends([run, other])
-        rows += [
-            (f"{name} closure, the {g['jobs']} jobs of {other.name}", g) for name, g in pair.items()
-        ]
+    then, for each ``--beside`` run (by name), both closures on the jobs the two runs share.
+    The runs are `closure_rows` entries, each read once."""
+    rows = [(f"{own[1]} closure, every charted job", at_ends([own])[own[1]])]
+    for name, other in beside.items():
+        pair = at_ends([own, other])
+        rows += [(f"{load} closure, the {g['jobs']} jobs of {name}", g) for load, g in pair.items()]
     return rows
 
 
@@ -150,19 +151,18 @@ def _stiff(m: dict[str, Any], shape: str) -> str:
     )
 
 
-def stiff_beside(beside: Sequence[Path]) -> list[str]:
+def stiff_beside(beside: dict[str, tuple[Any, str, float]]) -> list[str]:
     """Table rows: stiff > soft per shape under each ``--beside`` run's closing load, over its
     converged rows with a stress (reopened or not, as the paper counted), paired as the
     analysis pairs them (same geometry, orientation and stage)."""
     lines = []
-    for other in beside:
-        rows, load, _ = closure_rows(other)
+    for name, (rows, load, _) in beside.items():
         rows = rows[rows[STRESS] > 0]
         svs, _ = stiff_vs_soft(rows)
         jobs = rows["job_id"].nunique()
         for shape, label in (("cylindrical", "curved wounds"), ("wedge", "wedges")):
             lines.append(
-                f"| stiff > soft, {label} ({load} closure, the {jobs:,} jobs of {other.name})"
+                f"| stiff > soft, {label} ({load} closure, the {jobs:,} jobs of {name})"
                 f" | {PAPER[shape]} | {_stiff({'stiff_vs_soft': svs}, shape)} |"
             )
     return lines
@@ -382,7 +382,9 @@ def page(
     analysis = run / "analysis"
     m = json.loads((analysis / "metrics.json").read_text())
     c = charted(table_path, run)
-    load = load_run(run).sweep.stages.closure_load
+    own = closure_rows(run)  # each run's rows read once, for every table row below
+    others = {b.name: closure_rows(b) for b in beside}
+    load = own[1]
     report = (analysis / "report.md").read_text()
     report = re.sub(r"^# .*\n", "", report)
     report = re.sub(r"\(([\w]+\.(?:png|svg))\)", r"(figures/atlas/\1)", report)
@@ -404,7 +406,7 @@ then `python scripts/atlas_page.py RUN`.{off_grid_runs(m, beside)}
 {commands(timings, c) if timings is not None else ""}
 ## The paper and ours, row by row
 
-{table(c, m, figure2_rows(run, beside, load), stiff_beside(beside))}
+{table(c, m, figure2_rows(own, others), stiff_beside(others))}
 
 Figure 3's panels: A and B `training_random.png`, C `importance_random.png`, D `roc_random.png`.
 

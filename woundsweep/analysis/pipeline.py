@@ -173,11 +173,13 @@ def run_analysis(
 
         if run is None:
             raise AnalysisError(f"--beside: {rd} has no sweep to say how it was closed")
-        compared = [closure_entry(results, run)] + [closure_rows(other) for other in beside]
+        compared = common_jobs(
+            [closure_entry(results, run)] + [closure_rows(other) for other in beside]
+        )
         loads = [c[1] for c in compared]
         if len(set(loads)) != len(loads):
             raise AnalysisError(f"--beside: each run needs its own closing load, got {loads}")
-        if common_jobs(compared)[0][0].empty:
+        if compared[0][0].empty:
             raise AnalysisError("--beside: the runs have no converged job in common")
     degree = rows_element_degree(results)
     record = trained_on(run, results)
@@ -223,7 +225,7 @@ def run_analysis(
         import pandas as pd
 
         closures = closure_summary(compared)
-        pos = profile_positions(pd.concat([c[0] for c in common_jobs(compared)], ignore_index=True))
+        pos = profile_positions(pd.concat([c[0] for c in compared], ignore_index=True))
     target = rows[STRESS].to_numpy(dtype=np.float64)
     metrics: dict[str, Any] = {
         "woundsweep_version": __version__,

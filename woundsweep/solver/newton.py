@@ -255,7 +255,7 @@ class NewtonSolver:
         if kind != self._pc_kind:
             self._pc_kind = kind
             self._factored = False
-        if not self._factored or self.ksp is None:
+        if not self._factored:
             self._direct_solver(op, kind)
             self._factored = True
         assert self.ksp is not None

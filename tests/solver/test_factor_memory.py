@@ -1,6 +1,7 @@
-"""Newton's direct solver across new operators: each new matrix (a symmetric subspace set
-again, or a contact stage's pattern grown) gets a fresh MUMPS factorisation and the old one
-is freed, so a long contact stage's memory stays that of one factorisation."""
+"""Newton's memory over a long solve: each new matrix (a symmetric subspace set again, or a
+contact stage's pattern grown) gets a fresh MUMPS factorisation and the old one is freed,
+and the PETSc objects a problem drops at each step are freed, so a stage of hundreds of
+steps holds what one step needs."""
 
 from __future__ import annotations
 
@@ -89,3 +90,43 @@ def test_a_new_operator_frees_the_old_factorisation() -> None:
     np.testing.assert_allclose(K @ p.u, 1.0, atol=1e-8)
     # Eight more factorisations after the second: kept, they would add 8 x the factor's size.
     assert rss[-1] - rss[1] < 2 * max(factor_mb), (rss, factor_mb)
+
+
+class _Temporaries(_Poisson):
+    """R(u) = u - 100 on 100 dofs (a unit Jacobian), whose residual makes a fresh 1 MB
+    PETSc vector each time and drops it, as a form assembled anew does."""
+
+    def __init__(self) -> None:
+        import scipy.sparse as sp
+
+        self.K = sp.identity(100, format="csr")
+        self.u = np.zeros(100)
+
+    def residual(self, b: Any) -> None:
+        from petsc4py import PETSc
+
+        tmp = PETSc.Vec().createSeq(2**17)
+        tmp.set(1.0)
+        b.getArray()[:] = self.u - 100.0 * tmp.getArray(readonly=True)[: len(self.u)]
+
+    def max_strain(self, du: np.ndarray) -> float:
+        return float(np.abs(du).max())
+
+
+@pytest.mark.fem
+def test_objects_a_problem_drops_at_each_step_are_freed() -> None:
+    """The strain limit (0.5 per update) makes 200 steps of the linear R(u) = u - 100; kept,
+    the dropped vectors would hold 200 MB."""
+    from petsc4py import PETSc
+
+    from woundsweep.solver.newton import NewtonSolver
+
+    p = _Temporaries()
+    K = p.K
+    A = PETSc.Mat().createAIJ(K.shape, csr=(K.indptr, K.indices, K.data))
+    newton = NewtonSolver(p, A, NewtonSettings(rtol=0.0, atol=1e-6, stol=1e-6, max_iterations=300))
+    before = _rss_mb()
+    res = newton.solve(Dirichlet.none())
+    assert res.status == StageStatus.CONVERGED and res.iterations > 200
+    np.testing.assert_allclose(p.u, 100.0)
+    assert _rss_mb() - before < 20, _rss_mb() - before

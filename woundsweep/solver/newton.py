@@ -149,6 +149,16 @@ class NewtonResult(NamedTuple):
     residual_time_s: float
 
 
+def free_dropped_petsc_objects() -> None:
+    """Free the PETSc objects Python has dropped. petsc4py (3.18 and later) does not destroy
+    an object when its Python reference goes: it joins a garbage list that only
+    ``PETSc.garbage_cleanup`` empties, so temporaries made at every step of a long stage
+    (the problem's assembled vectors, a contact pattern's matrices) would accumulate."""
+    cleanup = getattr(PETSc, "garbage_cleanup", None)  # absent before petsc4py 3.18
+    if cleanup is not None:
+        cleanup()
+
+
 class _Step(NamedTuple):
     """An accepted update: relaxation, whether it was reduced, and the new state's data."""
 
@@ -171,6 +181,7 @@ class NewtonSolver:
         self.A.setOption(PETSc.Mat.Option.KEEP_NONZERO_PATTERN, True)
         self.b, self.dx = A.createVecs()[1], A.createVecs()[0]
         self.rvec = self.b.duplicate()
+        self._Adu = self.b.duplicate()  # the linear solve's check, A du
         self.ksp: PETSc.KSP | None = None  # made for each new operator (`_direct_solver`)
         self._factored = False
         self._pc_kind = "lu"
@@ -292,10 +303,9 @@ class NewtonSolver:
             du = wb.correct(du)
         if not np.all(np.isfinite(du)):
             return None
-        check = self.b.duplicate()
         self.dx.getArray()[:] = du
-        self.A.mult(self.dx, check)
-        Adu = check.getArray(readonly=True).copy()
+        self.A.mult(self.dx, self._Adu)
+        Adu = self._Adu.getArray(readonly=True).copy()
         if wb is not None:
             Adu += wb.apply(du)
         err = np.linalg.norm(Adu - rhs)
@@ -377,6 +387,7 @@ class NewtonSolver:
             it += 1
             rhs = -r_free
             rhs[rows] = bc_err
+            free_dropped_petsc_objects()
             try:
                 ta, tf = self._factor(rows, rhs)
                 t_asm += ta

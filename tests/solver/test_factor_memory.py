@@ -22,6 +22,17 @@ def _factor_info(newton: Any) -> tuple[int, int]:
     return F.getMumpsIcntl(14), F.getMumpsInfog(22)
 
 
+def _newton(p: Any, **settings: Any) -> Any:
+    """A NewtonSolver on ``p``, its matrix made from ``p.K``'s pattern."""
+    from petsc4py import PETSc
+
+    from woundsweep.solver.newton import NewtonSolver
+
+    K = p.K
+    A = PETSc.Mat().createAIJ(K.shape, csr=(K.indptr, K.indices, K.data))
+    return NewtonSolver(p, A, NewtonSettings(**settings))
+
+
 def _rss_mb() -> float:
     with open("/proc/self/statm") as f:
         return int(f.read().split()[1]) * 4096 / 2**20
@@ -67,15 +78,12 @@ class _Poisson:
 @pytest.mark.fem
 def test_a_new_operator_frees_the_old_factorisation() -> None:
     import scipy.sparse as sp
-    from petsc4py import PETSc
 
-    from woundsweep.solver.newton import NewtonSolver
     from woundsweep.solver.symmetry import SymmetryBasis
 
     p = _Poisson(22)
     K = p.K
-    A = PETSc.Mat().createAIJ(K.shape, csr=(K.indptr, K.indices, K.data))
-    newton = NewtonSolver(p, A, NewtonSettings(rtol=0.0, atol=1e-9, stol=1e-12))
+    newton = _newton(p, rtol=0.0, atol=1e-9, stol=1e-12)
     basis = SymmetryBasis(sp.identity(K.shape[0], format="csr"), 1)
     rss, factor_mb = [], []
     for _ in range(10):
@@ -117,14 +125,8 @@ class _Temporaries(_Poisson):
 def test_objects_a_problem_drops_at_each_step_are_freed() -> None:
     """The strain limit (0.5 per update) makes 200 steps of the linear R(u) = u - 100; kept,
     the dropped vectors would hold 200 MB."""
-    from petsc4py import PETSc
-
-    from woundsweep.solver.newton import NewtonSolver
-
     p = _Temporaries()
-    K = p.K
-    A = PETSc.Mat().createAIJ(K.shape, csr=(K.indptr, K.indices, K.data))
-    newton = NewtonSolver(p, A, NewtonSettings(rtol=0.0, atol=1e-6, stol=1e-6, max_iterations=300))
+    newton = _newton(p, rtol=0.0, atol=1e-6, stol=1e-6, max_iterations=300)
     before = _rss_mb()
     res = newton.solve(Dirichlet.none())
     assert res.status == StageStatus.CONVERGED and res.iterations > 200
